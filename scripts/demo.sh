@@ -1,0 +1,6 @@
+#!/usr/bin/env bash
+# Set-up plus the main job on the embedded default: grasps for a shipped example part, written to out/demo/.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+scripts/setup.sh
+exec .venv/bin/graspgen demo "$@"

@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# Creates .venv and installs graspgen with pinned dependencies (constraints.txt). Idempotent and quick when
+# nothing changed: it reinstalls only when pyproject.toml or constraints.txt differ from the last install.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PY=${PYTHON:-python3}
+if [ ! -x .venv/bin/python ]; then
+  "$PY" -m venv .venv
+fi
+stamp=$(cat pyproject.toml constraints.txt | sha256sum | cut -d' ' -f1)
+if [ "$(cat .venv/.setup-stamp 2>/dev/null)" != "$stamp" ]; then
+  .venv/bin/python -m pip install -q --disable-pip-version-check --upgrade pip >/dev/null
+  .venv/bin/python -m pip install -q --disable-pip-version-check -c constraints.txt -e '.[dev]'
+  echo "$stamp" > .venv/.setup-stamp
+fi
