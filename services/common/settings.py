@@ -1,0 +1,120 @@
+"""One `Settings` object for API, worker and migrations (environment prefix `GRASPGEN_`).
+
+Read once with `get_settings()`, validated at start-up: a bad value stops the process before it serves anything.
+Nothing set means the embedded default: a SQLite file and local artifacts under `storage_dir`, jobs run in-process.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+from typing import Literal
+from urllib.parse import urlsplit
+
+from pydantic import Field, SecretStr, field_validator, model_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+__all__ = ["Settings", "get_settings"]
+
+
+class Settings(BaseSettings):
+    model_config = SettingsConfigDict(env_prefix="GRASPGEN_", extra="ignore", frozen=True)
+
+    # -- where things live ----------------------------------------------------------------------------------------
+    #: SQLAlchemy URL (postgresql+psycopg://...); unset: SQLite file `graspgen.sqlite3` under storage_dir
+    database_url: SecretStr | None = None
+    #: PostgreSQL schema holding the tables (tests isolate runs with it); unset: the server's default search_path
+    database_schema: str | None = Field(default=None, pattern=r"^[a-z_][a-z0-9_]{0,62}$")
+    #: Celery broker (redis://host:6379/0); unset: jobs run on an in-process thread pool with the same task
+    broker_url: SecretStr | None = None
+    #: every Redis key the broker writes starts with this (several installations can share one Redis)
+    broker_key_prefix: str = ""
+    #: Celery queue the API sends jobs to and the worker consumes
+    queue: str = Field(default="graspgen", pattern=r"^[A-Za-z0-9._-]{1,100}$")
+    #: local artifacts, the embedded SQLite file and the generated tokens file
+    storage_dir: Path = Path("./var/graspgen")
+    #: S3-compatible storage for artifacts, s3://bucket/prefix; unset: storage_dir
+    storage_url: str | None = None
+    #: endpoint of a non-AWS S3-compatible server (MinIO, moto); credentials come from the usual AWS_* variables
+    s3_endpoint_url: str | None = None
+    s3_region: str = "us-east-1"
+    #: JSON tokens file (CONTRACT.md Running); unset: storage_dir/tokens.json, created with an admin token
+    tokens_file: Path | None = None
+
+    # -- limits ---------------------------------------------------------------------------------------------------
+    max_upload_bytes: int = Field(default=50 * 1024 * 1024, ge=1024)
+    max_json_bytes: int = Field(default=2 * 1024 * 1024, ge=1024)
+    max_bulk_items: int = Field(default=1000, ge=1, le=100_000)
+    page_size_default: int = Field(default=50, ge=1, le=1000)
+    page_size_max: int = Field(default=500, ge=1, le=10_000)
+
+    # -- jobs -----------------------------------------------------------------------------------------------------
+    job_soft_time_limit_s: int = Field(default=900, ge=1)
+    job_time_limit_s: int = Field(default=960, ge=1)
+    #: Redis redelivers an unacknowledged job after this; above the hard limit so a running job is never doubled
+    broker_visibility_timeout_s: int = Field(default=1200, ge=1)
+    #: a job whose worker died this many times is failed instead of being run again
+    job_max_attempts: int = Field(default=3, ge=1, le=100)
+    #: prefork children are replaced after this many jobs (numba/trimesh caches do not grow without bound)
+    worker_max_tasks_per_child: int = Field(default=50, ge=1)
+    worker_concurrency: int = Field(default=1, ge=1, le=256)
+    #: threads running jobs in the embedded mode
+    embedded_workers: int = Field(default=1, ge=1, le=64)
+    #: progress is written to the job row at most this often (stage changes always)
+    progress_interval_s: float = Field(default=0.5, ge=0.0)
+
+    # -- serving --------------------------------------------------------------------------------------------------
+    host: str = "127.0.0.1"
+    port: int = Field(default=8000, ge=1, le=65535)
+    log_level: Literal["debug", "info", "warning", "error"] = "info"
+
+    @field_validator("storage_url")
+    @classmethod
+    def _check_storage_url(cls, v: str | None) -> str | None:
+        if v is None or v == "":
+            return None
+        parts = urlsplit(v)
+        if parts.scheme != "s3" or not parts.netloc:
+            raise ValueError("storage_url must look like s3://bucket/prefix")
+        return v
+
+    @field_validator("database_url", "broker_url", mode="before")
+    @classmethod
+    def _empty_is_unset(cls, v: object) -> object:
+        return None if v == "" else v
+
+    @model_validator(mode="after")
+    def _check_limits(self) -> Settings:
+        if not self.job_soft_time_limit_s < self.job_time_limit_s:
+            raise ValueError("job_soft_time_limit_s must be below job_time_limit_s")
+        if not self.broker_visibility_timeout_s > self.job_time_limit_s:
+            raise ValueError(
+                "broker_visibility_timeout_s must be above job_time_limit_s, or a running job would be delivered twice"
+            )
+        if self.page_size_default > self.page_size_max:
+            raise ValueError("page_size_default must not exceed page_size_max")
+        return self
+
+    # -- derived --------------------------------------------------------------------------------------------------
+    @property
+    def embedded_database(self) -> bool:
+        return self.database_url is None
+
+    @property
+    def embedded_worker(self) -> bool:
+        return self.broker_url is None
+
+    @property
+    def sqlalchemy_url(self) -> str:
+        if self.database_url is not None:
+            return self.database_url.get_secret_value()
+        return f"sqlite:///{(self.storage_dir / 'graspgen.sqlite3').resolve()}"
+
+    @property
+    def tokens_path(self) -> Path:
+        return self.tokens_file if self.tokens_file is not None else self.storage_dir / "tokens.json"
+
+
+@lru_cache(maxsize=1)
+def get_settings() -> Settings:
+    return Settings()

@@ -1,0 +1,206 @@
+"""Content-addressed artifact storage: a local directory or an S3-compatible bucket, behind one interface.
+
+Keys are `sha256/<2 hex>/<64 hex>` and are derived from the bytes only, never from user input. A blob appears whole or
+not at all: the local backend writes a temp file in the same directory, fsyncs and renames it; S3 makes an object
+visible only once its upload completed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+import shutil
+import tempfile
+from abc import ABC, abstractmethod
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import BinaryIO
+from urllib.parse import urlsplit
+
+from .settings import Settings
+
+__all__ = ["Storage", "LocalStorage", "S3Storage", "StoredBlob", "make_storage", "sha256_file", "blob_key"]
+
+_CHUNK = 1024 * 1024
+
+
+@dataclass(frozen=True)
+class StoredBlob:
+    key: str
+    sha256: str
+    size: int
+
+
+def blob_key(sha256: str) -> str:
+    if len(sha256) != 64 or any(c not in "0123456789abcdef" for c in sha256):
+        raise ValueError("not a sha256 hex digest")
+    return f"sha256/{sha256[:2]}/{sha256}"
+
+
+def sha256_file(path: str | Path) -> tuple[str, int]:
+    h = hashlib.sha256()
+    size = 0
+    with open(path, "rb") as f:
+        while chunk := f.read(_CHUNK):
+            h.update(chunk)
+            size += len(chunk)
+    return h.hexdigest(), size
+
+
+class Storage(ABC):
+    """put_* return the blob's key; the same bytes always give the same key and are stored once."""
+
+    def put_file(self, path: str | Path) -> StoredBlob:
+        digest, size = sha256_file(path)
+        key = blob_key(digest)
+        if not self.exists(key):
+            self._upload(Path(path), key)
+        return StoredBlob(key, digest, size)
+
+    def put_bytes(self, data: bytes) -> StoredBlob:
+        digest = hashlib.sha256(data).hexdigest()
+        key = blob_key(digest)
+        if not self.exists(key):
+            with tempfile.NamedTemporaryFile(prefix="graspgen-put-", delete=False) as tmp:
+                tmp.write(data)
+            try:
+                self._upload(Path(tmp.name), key)
+            finally:
+                os.unlink(tmp.name)
+        return StoredBlob(key, digest, len(data))
+
+    def get_bytes(self, key: str) -> bytes:
+        with self.open(key) as f:
+            return f.read()
+
+    def download(self, key: str, dest: str | Path) -> Path:
+        """Copy a blob to a local file (the worker reads meshes and candidates from paths)."""
+        dest = Path(dest)
+        with self.open(key) as src, open(dest, "wb") as out:
+            shutil.copyfileobj(src, out, _CHUNK)
+        return dest
+
+    def iter_chunks(self, key: str, chunk_size: int = 256 * 1024) -> Iterator[bytes]:
+        with self.open(key) as f:
+            while chunk := f.read(chunk_size):
+                yield chunk
+
+    @abstractmethod
+    def exists(self, key: str) -> bool: ...
+
+    @abstractmethod
+    def open(self, key: str) -> BinaryIO:
+        """A readable binary file object; raises FileNotFoundError for a missing key."""
+
+    @abstractmethod
+    def size(self, key: str) -> int: ...
+
+    @abstractmethod
+    def ping(self) -> None:
+        """Raise when the storage cannot be reached."""
+
+    @abstractmethod
+    def _upload(self, path: Path, key: str) -> None: ...
+
+
+class LocalStorage(Storage):
+    def __init__(self, root: str | Path) -> None:
+        self.root = Path(root).resolve() / "blobs"
+        self.root.mkdir(parents=True, exist_ok=True)
+
+    def _path(self, key: str) -> Path:
+        # keys come from blob_key() only; refuse anything else rather than build a path from it
+        parts = key.split("/")
+        if len(parts) != 3 or parts[0] != "sha256" or blob_key(parts[2]) != key:
+            raise ValueError("invalid storage key")
+        return self.root / parts[1] / parts[2]
+
+    def exists(self, key: str) -> bool:
+        return self._path(key).is_file()
+
+    def open(self, key: str) -> BinaryIO:
+        return open(self._path(key), "rb")
+
+    def size(self, key: str) -> int:
+        return self._path(key).stat().st_size
+
+    def ping(self) -> None:
+        if not os.access(self.root, os.W_OK):
+            raise OSError(f"storage directory {self.root} is not writable")
+
+    def _upload(self, path: Path, key: str) -> None:
+        final = self._path(key)
+        final.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=".tmp-", dir=final.parent)
+        try:
+            with os.fdopen(fd, "wb") as out, open(path, "rb") as src:
+                shutil.copyfileobj(src, out, _CHUNK)
+                out.flush()
+                os.fsync(out.fileno())
+            os.replace(tmp, final)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            raise
+
+
+class S3Storage(Storage):
+    """s3://bucket/prefix through boto3; works with AWS S3 and S3-compatible servers (MinIO, moto, Ceph)."""
+
+    def __init__(self, url: str, *, endpoint_url: str | None = None, region: str = "us-east-1") -> None:
+        import boto3
+        from botocore.config import Config
+
+        parts = urlsplit(url)
+        self.bucket = parts.netloc
+        self.prefix = parts.path.strip("/")
+        self.client = boto3.client(
+            "s3",
+            endpoint_url=endpoint_url,
+            region_name=region,
+            config=Config(retries={"max_attempts": 5, "mode": "standard"}, connect_timeout=5, read_timeout=60),
+        )
+
+    def _name(self, key: str) -> str:
+        blob_key(key.rsplit("/", 1)[-1])  # validates
+        return f"{self.prefix}/{key}" if self.prefix else key
+
+    def exists(self, key: str) -> bool:
+        from botocore.exceptions import ClientError
+
+        try:
+            self.client.head_object(Bucket=self.bucket, Key=self._name(key))
+            return True
+        except ClientError as exc:
+            if exc.response.get("Error", {}).get("Code") in ("404", "NoSuchKey", "NotFound"):
+                return False
+            raise
+
+    def open(self, key: str) -> BinaryIO:
+        from botocore.exceptions import ClientError
+
+        try:
+            obj = self.client.get_object(Bucket=self.bucket, Key=self._name(key))
+        except ClientError as exc:
+            if exc.response.get("Error", {}).get("Code") in ("404", "NoSuchKey", "NotFound"):
+                raise FileNotFoundError(key) from None
+            raise
+        return obj["Body"]  # a StreamingBody: read(n), close(), context manager
+
+    def size(self, key: str) -> int:
+        return int(self.client.head_object(Bucket=self.bucket, Key=self._name(key))["ContentLength"])
+
+    def ping(self) -> None:
+        self.client.head_bucket(Bucket=self.bucket)
+
+    def _upload(self, path: Path, key: str) -> None:
+        # upload_file switches to multipart for large files; either way the object appears only when complete
+        self.client.upload_file(str(path), self.bucket, self._name(key))
+
+
+def make_storage(settings: Settings) -> Storage:
+    if settings.storage_url:
+        return S3Storage(settings.storage_url, endpoint_url=settings.s3_endpoint_url, region=settings.s3_region)
+    return LocalStorage(settings.storage_dir)
