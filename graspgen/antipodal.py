@@ -1,0 +1,305 @@
+"""Pair criteria (a) stroke, (b) outside, (c) friction, as compiled kernels over a spatial grid.
+
+All unordered pairs (i < j) of the sampled points are judged, cheapest test first; pairs in grid cells farther
+apart than the largest allowed width are counted as stroke rejections without being visited, so no n^2 array is
+ever built. Contact 0 is the point with the smaller index; the closing axis runs from contact 0 to contact 1.
+
+Outside grasp: the fingers close from outside, so each normal points away from the other contact
+(n0 . d < 0 < n1 . d, d = p1 - p0). Inside grasp (optional): the fingers sit between the contacts and open
+outwards, so the normals face each other (n0 . d > 0 > n1 . d). Friction: the finger force is along the closing
+axis, so the angle between the axis and each (inward) normal must stay within arctan(mu) / safety_factor.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit, prange
+
+__all__ = [
+    "PairResult",
+    "cone_half_angle_rad",
+    "antipodal_pairs",
+    "friction_margin_deg",
+    "grid_order",
+    "pair_cell_size",
+]
+
+
+@dataclass(frozen=True)
+class PairResult:
+    """Pairs that pass (a)-(c), in a deterministic order (by contact 0, then contact 1)."""
+
+    i: np.ndarray  # (m,) int64, contact 0 (index into the sample)
+    j: np.ndarray  # (m,) int64, contact 1, i < j
+    inside: np.ndarray  # (m,) bool, True for inside grasps
+    pairs_total: int
+    rejected_stroke: int
+    rejected_outside: int
+    rejected_friction: int
+
+
+def cone_half_angle_rad(friction: float, safety_factor: float) -> float:
+    """The usable friction cone half-angle: arctan(mu) / safety factor."""
+    return math.atan(friction) / safety_factor
+
+
+def pair_cell_size(stroke: float, inside: bool, finger_thickness: float) -> float:
+    """Grid cell of the pair search: half the largest allowed contact distance."""
+    return (stroke + (2 * finger_thickness if inside else 0.0)) / 2.0
+
+
+def grid_order(points: np.ndarray, cell: float) -> np.ndarray:
+    """A deterministic spatial order of `points` (n, 3): by grid cell (x-major), stable within a cell.
+
+    Points already in this order skip a re-sort of the pairs, and neighbouring candidates share blockers in
+    the collision stage.
+    """
+    return _grid(np.asarray(points, dtype=np.float64), cell)[0]
+
+
+def _grid(points: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Sort points into a dense grid: returns (order, cell_start (ncells+1,), dims (3,), origin (3,))."""
+    origin = points.min(axis=0)
+    idx = np.floor((points - origin) / cell).astype(np.int64)
+    dims = idx.max(axis=0) + 1
+    flat = (idx[:, 0] * dims[1] + idx[:, 1]) * dims[2] + idx[:, 2]
+    order = np.argsort(flat, kind="stable")
+    counts = np.bincount(flat, minlength=int(np.prod(dims)))
+    cell_start = np.zeros(len(counts) + 1, dtype=np.int64)
+    np.cumsum(counts, out=cell_start[1:])
+    return order, cell_start, dims.astype(np.int64), origin
+
+
+@njit(cache=True, inline="always")
+def _judge(X, Y, Z, NX, NY, NZ, i, j, lims, inside_ok):
+    """(accepted, bad orientation, passes (a) and (b), inside) for the pair (i, j); branch-free."""
+    lo2, hi2, out_lo2, out_hi2, in_lo2, in_hi2, cos2 = lims[0], lims[1], lims[2], lims[3], lims[4], lims[5], lims[6]
+    dx = X[j] - X[i]
+    dy = Y[j] - Y[i]
+    dz = Z[j] - Z[i]
+    d2 = dx * dx + dy * dy + dz * dz
+    u = NX[i] * dx + NY[i] * dy + NZ[i] * dz
+    v = NX[j] * dx + NY[j] * dy + NZ[j] * dz
+    lim = cos2 * d2
+    in_range = (d2 <= hi2) & (d2 >= lo2)
+    o_out = (u < 0.0) & (v > 0.0)
+    o_in = inside_ok & (u > 0.0) & (v < 0.0)
+    ab_out = o_out & (d2 <= out_hi2) & (d2 >= out_lo2)
+    ab_in = o_in & (d2 <= in_hi2) & (d2 >= in_lo2)
+    pass_ab = in_range & (ab_out | ab_in)
+    acc = pass_ab & (u * u >= lim) & (v * v >= lim)
+    return acc, in_range & ~(o_out | o_in), pass_ab, ab_in
+
+
+@njit(cache=True)
+def _count_run(X, Y, Z, NX, NY, NZ, i, start, stop, lims, inside_ok):
+    # no stores in this loop, so that it vectorises
+    n_acc = 0
+    n_bad = 0
+    n_ab = 0
+    for j in range(start, stop):
+        acc, bad, ab, _ = _judge(X, Y, Z, NX, NY, NZ, i, j, lims, inside_ok)
+        n_acc += acc
+        n_bad += bad
+        n_ab += ab
+    return n_acc, n_bad, n_ab
+
+
+@njit(cache=True)
+def _fill_run(X, Y, Z, NX, NY, NZ, i, start, stop, lims, inside_ok, out_j, out_inside, pos, end):
+    # branch-free compaction: always store, advance only on acceptance; the row's count is known from the
+    # counting pass, so stopping at `end` keeps every store inside this row's slice
+    for j in range(start, stop):
+        if pos == end:
+            break
+        acc, _, _, ins = _judge(X, Y, Z, NX, NY, NZ, i, j, lims, inside_ok)
+        out_j[pos] = j
+        out_inside[pos] = ins
+        pos += acc
+    return pos
+
+
+@njit(parallel=True, cache=True)
+def _pairs_kernel(
+    X,
+    Y,
+    Z,
+    NX,
+    NY,
+    NZ,
+    cell_start,
+    dims,
+    origin,
+    cell,
+    reach,
+    lims,
+    inside_ok,
+    fill,
+    offsets,
+    out_j,
+    out_inside,
+    counters,
+):
+    n = X.shape[0]
+    # row i has n - 1 - i partners: pairing row k with row n - 1 - k balances the threads' work
+    for k in prange((n + 1) // 2):
+        for side in range(2):
+            kk = np.int64(k)  # prange indices are unsigned: keep the row index signed
+            i = kk if side == 0 else n - 1 - kk
+            if side == 1 and i == kk:
+                break
+            _pairs_row(
+                X,
+                Y,
+                Z,
+                NX,
+                NY,
+                NZ,
+                cell_start,
+                dims,
+                origin,
+                cell,
+                reach,
+                lims,
+                inside_ok,
+                fill,
+                offsets,
+                out_j,
+                out_inside,
+                counters,
+                i,
+            )
+
+
+@njit(cache=True)
+def _pairs_row(
+    X,
+    Y,
+    Z,
+    NX,
+    NY,
+    NZ,
+    cell_start,
+    dims,
+    origin,
+    cell,
+    reach,
+    lims,
+    inside_ok,
+    fill,
+    offsets,
+    out_j,
+    out_inside,
+    counters,
+    i,
+):
+    xi, yi, zi = X[i], Y[i], Z[i]
+    ci = min(max(int((xi - origin[0]) / cell), 0), dims[0] - 1)
+    cj = min(max(int((yi - origin[1]) / cell), 0), dims[1] - 1)
+    ck = min(max(int((zi - origin[2]) / cell), 0), dims[2] - 1)
+    n_bad_orient = 0
+    n_pass_ab = 0
+    n_acc = 0
+    pos = offsets[i] if fill else 0
+    end = offsets[i + 1] if fill else 0
+    for a in range(max(ci - reach, 0), min(ci + reach + 1, dims[0])):
+        for b in range(max(cj - reach, 0), min(cj + reach + 1, dims[1])):
+            base = (a * dims[1] + b) * dims[2]
+            # the cells of one (a, b) column are contiguous: one run of points
+            start = max(cell_start[base + max(ck - reach, 0)], i + 1)
+            stop = cell_start[base + min(ck + reach + 1, dims[2])]
+            if fill:
+                pos = _fill_run(X, Y, Z, NX, NY, NZ, i, start, stop, lims, inside_ok, out_j, out_inside, pos, end)
+            else:
+                c0, c1, c2 = _count_run(X, Y, Z, NX, NY, NZ, i, start, stop, lims, inside_ok)
+                n_acc += c0
+                n_bad_orient += c1
+                n_pass_ab += c2
+    if fill:
+        return
+    counters[i, 0] = n_acc
+    counters[i, 1] = n_bad_orient
+    counters[i, 2] = n_pass_ab
+
+
+def antipodal_pairs(
+    points: np.ndarray,
+    normals: np.ndarray,
+    *,
+    stroke: float,
+    min_width: float,
+    friction: float,
+    safety_factor: float,
+    inside: bool,
+    finger_thickness: float,
+) -> PairResult:
+    """All pairs passing (a)-(c). points, normals: (n, 3) float64, metres / unit outward normals.
+
+    Outside grasps need a contact distance in [min_width, stroke]; inside grasps in
+    [min_width + 2 finger_thickness, stroke + 2 finger_thickness] (the fingers' own thickness sits between the
+    contacts).
+    """
+    p = np.ascontiguousarray(points, dtype=np.float64)
+    nrm = np.ascontiguousarray(normals, dtype=np.float64)
+    n = len(p)
+    total = n * (n - 1) // 2
+    out_lo, out_hi = float(min_width), float(stroke)
+    in_lo, in_hi = float(min_width + 2 * finger_thickness), float(stroke + 2 * finger_thickness)
+    lo = out_lo if not inside else min(out_lo, in_lo)
+    hi = out_hi if not inside else max(out_hi, in_hi)
+    if n < 2:
+        e = np.zeros(0, dtype=np.int64)
+        return PairResult(e, e, np.zeros(0, bool), total, total, 0, 0)
+    cos_lim = math.cos(cone_half_angle_rad(friction, safety_factor))
+    # cells of half the reach keep the visited volume near the sphere of radius `hi`
+    cell = max(pair_cell_size(stroke, inside, finger_thickness), 1e-6)
+    order, cell_start, dims, origin = _grid(p, cell)
+    ps, ns = p[order], nrm[order]
+    soa = tuple(np.ascontiguousarray(a[:, k]) for a in (ps, ns) for k in range(3))
+    lims = np.array([lo * lo, hi * hi, out_lo**2, out_hi**2, in_lo**2, in_hi**2, cos_lim**2])
+    counters = np.zeros((n, 3), dtype=np.int64)
+    offsets = np.zeros(n + 1, dtype=np.int64)
+    args = (*soa, cell_start, dims, origin, cell, 2, lims, bool(inside))
+    _pairs_kernel(*args, False, offsets, np.zeros(0, np.int64), np.zeros(0, np.bool_), counters)
+    counts = counters[:, 0]
+    np.cumsum(counts, out=offsets[1:])
+    m = int(offsets[-1])
+    out_j = np.empty(m, dtype=np.int64)
+    out_inside = np.empty(m, dtype=np.bool_)
+    _pairs_kernel(*args, True, offsets, out_j, out_inside, counters)
+    out_i = np.repeat(np.arange(n, dtype=np.int64), counts)
+    if np.array_equal(order, np.arange(n)):
+        i_final, j_final, inside_final = out_i, out_j, out_inside
+    else:
+        # back to the caller's indices, contact 0 = the smaller original index
+        oi, oj = order[out_i], order[out_j]
+        i_final, j_final = np.minimum(oi, oj), np.maximum(oi, oj)
+        key = np.lexsort((j_final, i_final))
+        i_final, j_final, inside_final = i_final[key], j_final[key], out_inside[key]
+    rejected_outside = int(counters[:, 1].sum())
+    rejected_friction = int(counters[:, 2].sum()) - m
+    return PairResult(
+        i=i_final,
+        j=j_final,
+        inside=inside_final,
+        pairs_total=total,
+        rejected_stroke=total - m - rejected_outside - rejected_friction,
+        rejected_outside=rejected_outside,
+        rejected_friction=rejected_friction,
+    )
+
+
+def friction_margin_deg(
+    points: np.ndarray, normals: np.ndarray, i: np.ndarray, j: np.ndarray, inside: np.ndarray, half_angle_rad: float
+) -> np.ndarray:
+    """Cone half-angle (after the safety factor) minus the worse contact angle, degrees: (m,) float64."""
+    d = points[j] - points[i]
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    sign = np.where(inside, 1.0, -1.0)
+    c0 = np.clip(sign * np.sum(normals[i] * d, axis=1), -1.0, 1.0)
+    c1 = np.clip(-sign * np.sum(normals[j] * d, axis=1), -1.0, 1.0)
+    worst = np.maximum(np.arccos(c0), np.arccos(c1))
+    return np.degrees(half_angle_rad - worst)
