@@ -1,0 +1,349 @@
+"""Job submission (single, cluster, bulk), idempotency keys, views and cancellation.
+
+Rows are committed before anything is sent to a worker; if the broker refuses, the rows are removed again so that a
+failed request leaves the database as it was.
+"""
+
+from __future__ import annotations
+
+import uuid
+from typing import Any
+
+from sqlalchemy import delete, func, select
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session
+
+from graspgen.errors import GraspgenError, InvalidParameterError
+from graspgen.params import Params
+from services.common import jobs as J  # noqa: N812 - short name for the shared job helpers
+from services.common.models import (
+    TERMINAL_STATES,
+    GraspSet,
+    Gripper,
+    GripperVersion,
+    Job,
+    ObjectModel,
+    ObjectVersion,
+    utcnow,
+)
+from services.common.tokens import Principal
+from services.worker.dispatch import Dispatcher, DispatchError
+
+from ..problems import ApiError
+from ..schemas import BulkRequest, JobRequest
+
+__all__ = ["submit_job", "submit_bulk", "job_out", "get_job", "cancel_job", "CLUSTER_PARAMS"]
+
+CLUSTER_PARAMS = ("k1", "k2", "seed")
+
+
+def _object_version(session: Session, name: str, version: int | None) -> ObjectVersion:
+    q = (
+        select(ObjectVersion)
+        .join(ObjectModel, ObjectModel.id == ObjectVersion.object_id)
+        .where(ObjectModel.name == name)
+    )
+    q = q.where(ObjectVersion.version == version) if version else q.order_by(ObjectVersion.version.desc()).limit(1)
+    v = session.execute(q).scalars().first()
+    if v is None:
+        what = f"object {name!r}" + (f" version {version}" if version else "")
+        raise ApiError(422, "unknown-object", f"there is no {what}", field="object")
+    return v
+
+
+def _gripper_version(session: Session, name: str, version: int | None) -> GripperVersion:
+    q = select(GripperVersion).join(Gripper, Gripper.id == GripperVersion.gripper_id).where(Gripper.name == name)
+    q = q.where(GripperVersion.version == version) if version else q.order_by(GripperVersion.version.desc()).limit(1)
+    v = session.execute(q).scalars().first()
+    if v is None:
+        what = f"gripper {name!r}" + (f" version {version}" if version else "")
+        raise ApiError(422, "unknown-gripper", f"there is no {what}", field="gripper")
+    return v
+
+
+def _effective_params(given: dict[str, Any] | None, spec: dict[str, Any]) -> dict[str, Any]:
+    p = Params.from_dict(given)  # InvalidParameterError -> 422
+    return p.to_dict(friction=p.friction if p.friction is not None else float(spec["friction"]))
+
+
+def _resolve_generate(session: Session, item: dict[str, Any]) -> dict[str, Any]:
+    if not item.get("object") or not item.get("gripper"):
+        raise ApiError(422, "validation-error", "a generate job needs object and gripper", field="object")
+    ov = _object_version(session, item["object"], item.get("object_version"))
+    gv = _gripper_version(session, item["gripper"], item.get("gripper_version"))
+    return {
+        "object_version_id": ov.id,
+        "gripper_version_id": gv.id,
+        "params": _effective_params(item.get("params"), gv.spec),
+    }
+
+
+def _resolve_cluster(session: Session, body: JobRequest) -> dict[str, Any]:
+    if body.grasp_set is None:
+        raise ApiError(422, "validation-error", "a cluster job needs grasp_set", field="grasp_set")
+    extra = [k for k in ("object", "object_version", "gripper", "gripper_version") if getattr(body, k) is not None]
+    if extra:
+        raise ApiError(422, "validation-error", f"a cluster job takes grasp_set, not {extra[0]}", field=extra[0])
+    source = session.get(GraspSet, body.grasp_set)
+    if source is None:
+        raise ApiError(422, "unknown-grasp-set", f"there is no grasp set {body.grasp_set}", field="grasp_set")
+    given = dict(body.params or {})
+    unknown = sorted(set(given) - set(CLUSTER_PARAMS))
+    if unknown:
+        raise InvalidParameterError(
+            "a cluster job takes only k1, k2 and seed; not " + ", ".join(unknown), field=unknown[0]
+        )
+    if source.candidates_key is None:
+        raise ApiError(422, "no-candidates", f"grasp set {source.id} has no stored candidates", field="grasp_set")
+    merged = Params.from_dict({**source.params, **given}).to_dict()
+    return {
+        "object_version_id": source.object_version_id,
+        "gripper_version_id": source.gripper_version_id,
+        "source_grasp_set_id": source.id,
+        "params": merged,
+    }
+
+
+def _replay(session: Session, principal: Principal, key: str | None, request_sha: str) -> Job | None:
+    if key is None:
+        return None
+    job = session.execute(
+        select(Job).where(Job.created_by == principal.name, Job.idempotency_key == key)
+    ).scalar_one_or_none()
+    if job is not None and job.request_sha256 != request_sha:
+        raise ApiError(
+            422,
+            "idempotency-key-reused",
+            "this Idempotency-Key was used for a different request",
+            field="Idempotency-Key",
+        )
+    return job
+
+
+def _dispatch_or_undo(session: Session, dispatcher: Dispatcher, job_id: uuid.UUID, send: list[str]) -> None:
+    if not send:
+        return
+    try:
+        dispatcher.send(send)
+    except DispatchError as exc:
+        session.execute(delete(Job).where(Job.parent_id == job_id))
+        session.execute(delete(Job).where(Job.id == job_id))
+        session.commit()
+        raise ApiError(
+            503, "broker-unavailable", "jobs cannot be queued right now; retry later", headers={"Retry-After": "10"}
+        ) from exc
+
+
+def submit_job(
+    session: Session, dispatcher: Dispatcher, principal: Principal, body: JobRequest, idempotency_key: str | None
+) -> tuple[Job, bool]:
+    """Returns (job, replayed): replayed is true when an Idempotency-Key matched an earlier identical request."""
+    request = body.model_dump(exclude_none=True)
+    request_sha = J.sha256_json(request)
+    replayed = _replay(session, principal, idempotency_key, request_sha)
+    if replayed is not None:
+        return replayed, True
+    resolved = _resolve_cluster(session, body) if body.kind == "cluster" else _resolve_generate(session, request)
+    job = Job(
+        id=uuid.uuid4(),
+        kind=body.kind,
+        state="queued",
+        request=request,
+        idempotency_key=idempotency_key,
+        request_sha256=request_sha,
+        created_by=principal.name,
+        **resolved,
+    )
+    session.add(job)
+    try:
+        session.commit()
+    except IntegrityError:
+        session.rollback()  # the same key committed concurrently
+        again = _replay(session, principal, idempotency_key, request_sha)
+        if again is None:
+            raise
+        return again, True
+    _dispatch_or_undo(session, dispatcher, job.id, [str(job.id)])
+    return job, False
+
+
+def submit_bulk(
+    session: Session,
+    dispatcher: Dispatcher,
+    principal: Principal,
+    body: BulkRequest,
+    idempotency_key: str | None,
+    *,
+    max_items: int,
+) -> tuple[Job, bool]:
+    if len(body.items) > max_items:
+        raise ApiError(422, "too-many-items", f"a bulk job takes at most {max_items} items", field="items")
+    request = body.model_dump(exclude_none=True)
+    request_sha = J.sha256_json(request)
+    replayed = _replay(session, principal, idempotency_key, request_sha)
+    if replayed is not None:
+        return replayed, True
+    parent = Job(
+        id=uuid.uuid4(),
+        kind="bulk",
+        state="queued",
+        request={"items": len(body.items)},
+        idempotency_key=idempotency_key,
+        request_sha256=request_sha,
+        created_by=principal.name,
+    )
+    session.add(parent)
+    session.flush()
+    children: list[Job] = []
+    for i, item in enumerate(request["items"]):
+        child = Job(
+            id=uuid.uuid4(),
+            kind="generate",
+            state="queued",
+            request=item,
+            parent_id=parent.id,
+            item_index=i,
+            created_by=principal.name,
+        )
+        try:
+            for k, v in _resolve_generate(session, item).items():
+                setattr(child, k, v)
+        except ApiError as exc:
+            # a bad item fails alone; the others run
+            J.finish(child, "failed", J.problem(exc.code, exc.title, exc.detail, status=exc.status, **exc.extra))
+        except GraspgenError as exc:
+            extra = {"field": exc.field} if exc.field else {}
+            J.finish(child, "failed", J.problem(exc.code, "Invalid input", exc.message, **extra))
+        children.append(child)
+    session.add_all(children)
+    session.flush()
+    J.refresh_parent(session, parent.id)
+    try:
+        session.commit()
+    except IntegrityError:
+        session.rollback()
+        again = _replay(session, principal, idempotency_key, request_sha)
+        if again is None:
+            raise
+        return again, True
+    _dispatch_or_undo(session, dispatcher, parent.id, [str(c.id) for c in children if c.state == "queued"])
+    return parent, False
+
+
+def get_job(session: Session, job_id: uuid.UUID) -> Job:
+    job = session.get(Job, job_id)
+    if job is None:
+        raise ApiError(404, "not-found", f"no job {job_id}")
+    return job
+
+
+def job_out(session: Session, job: Job) -> dict[str, Any]:
+    out: dict[str, Any] = {
+        "id": job.id,
+        "kind": job.kind,
+        "state": job.state,
+        "stage": job.stage,
+        "progress": round(float(job.progress), 4),
+        "grasp_set": job.grasp_set_id,
+        "error": job.error,
+        "source_grasp_set": job.source_grasp_set_id,
+        "params": job.params,
+        "request": job.request,
+        "attempts": job.attempts,
+        "cancel_requested": job.cancel_requested,
+        "parent": job.parent_id,
+        "created_at": job.created_at,
+        "started_at": job.started_at,
+        "finished_at": job.finished_at,
+        "links": {"self": f"/v1/jobs/{job.id}", "cancel": f"/v1/jobs/{job.id}/cancel"},
+    }
+    if job.grasp_set_id is not None:
+        out["links"]["grasp_set"] = f"/v1/grasp-sets/{job.grasp_set_id}"
+    if job.parent_id is not None:
+        out["links"]["parent"] = f"/v1/jobs/{job.parent_id}"
+    if job.object_version_id is not None:
+        name, version = session.execute(
+            select(ObjectModel.name, ObjectVersion.version)
+            .join(ObjectVersion, ObjectVersion.object_id == ObjectModel.id)
+            .where(ObjectVersion.id == job.object_version_id)
+        ).one()
+        out["object"], out["object_version"] = name, version
+    if job.gripper_version_id is not None:
+        name, version = session.execute(
+            select(Gripper.name, GripperVersion.version)
+            .join(GripperVersion, GripperVersion.gripper_id == Gripper.id)
+            .where(GripperVersion.id == job.gripper_version_id)
+        ).one()
+        out["gripper"], out["gripper_version"] = name, version
+    if job.kind == "bulk":
+        agg = J.aggregate_children(session, job.id)
+        children = session.execute(select(Job).where(Job.parent_id == job.id).order_by(Job.item_index)).scalars()
+        out["summary"] = {s: agg.counts.get(s, 0) for s in ("queued", "running", "succeeded", "failed", "cancelled")}
+        out["summary"]["total"] = agg.total
+        # progress and state are read live from the children; the parent row is refreshed as each child ends
+        out["progress"] = round(agg.progress, 4)
+        out["state"] = agg.state(cancel_requested=job.cancel_requested)
+        out["stage"] = f"{agg.done}/{agg.total} items done"
+        out["items"] = [
+            {
+                "index": c.item_index,
+                "id": c.id,
+                "state": c.state,
+                "stage": c.stage,
+                "progress": round(float(c.progress), 4),
+                "object": c.request.get("object"),
+                "gripper": c.request.get("gripper"),
+                "grasp_set": c.grasp_set_id,
+                "error": c.error,
+                "links": {"self": f"/v1/jobs/{c.id}"},
+            }
+            for c in children
+        ]
+    return out
+
+
+def cancel_job(session: Session, dispatcher: Dispatcher, principal: Principal, job_id: uuid.UUID) -> Job:
+    job = session.execute(select(Job).where(Job.id == job_id).with_for_update()).scalar_one_or_none()
+    if job is None:
+        raise ApiError(404, "not-found", f"no job {job_id}")
+    if job.created_by != principal.name and not principal.has("admin"):
+        raise ApiError(403, "forbidden", "only the job's submitter or an admin token may cancel it")
+    if job.state in TERMINAL_STATES and job.kind != "bulk":
+        if job.state == "cancelled":
+            return job
+        raise ApiError(409, "job-finished", f"the job has already {job.state}", state=job.state)
+    targets = [job]
+    if job.kind == "bulk":
+        targets = list(
+            session.execute(
+                select(Job).where(Job.parent_id == job.id, Job.state.not_in(TERMINAL_STATES)).with_for_update()
+            ).scalars()
+        )
+        if not targets and job.cancel_requested:
+            return job
+        if not targets and not job.cancel_requested:
+            state = J.aggregate_children(session, job.id).state(cancel_requested=False)
+            if state in TERMINAL_STATES:
+                raise ApiError(409, "job-finished", f"the bulk job has already {state}", state=state)
+        job.cancel_requested = True
+    revoke = []
+    for t in targets:
+        t.cancel_requested = True
+        if t.state == "queued":
+            J.finish(t, "cancelled")  # never started: cancelled now; running ones stop at their next stage
+            revoke.append(str(t.id))
+    if job.kind == "bulk":
+        session.flush()
+        J.refresh_parent(session, job.id)
+    elif job.parent_id is not None:
+        session.flush()
+        J.refresh_parent(session, job.parent_id)
+    job.updated_at = utcnow()
+    session.commit()
+    if revoke:
+        dispatcher.revoke(revoke)
+    return job
+
+
+def count_jobs(session: Session) -> int:
+    return session.execute(select(func.count()).select_from(Job)).scalar_one()

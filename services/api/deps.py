@@ -1,0 +1,80 @@
+"""Dependencies: the database session, the current principal (bearer token) and its scope checks."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from typing import Annotated
+
+from fastapi import Depends, Request
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from sqlalchemy.orm import Session
+
+from services.common.settings import Settings
+from services.common.storage import Storage
+from services.common.tokens import Principal, TokenStore
+from services.worker.dispatch import Dispatcher
+
+from .problems import ApiError
+
+__all__ = [
+    "SessionDep",
+    "SettingsDep",
+    "StorageDep",
+    "DispatcherDep",
+    "PrincipalDep",
+    "ReadDep",
+    "WriteDep",
+    "require",
+]
+
+_bearer = HTTPBearer(auto_error=False, description="A token from the tokens file; scopes read < write < admin")
+
+
+def get_session(request: Request) -> Iterator[Session]:
+    """One session per request; the route commits explicitly, anything unfinished rolls back."""
+    with request.app.state.db.sessions() as session:
+        yield session
+
+
+def get_settings(request: Request) -> Settings:
+    return request.app.state.settings
+
+
+def get_storage(request: Request) -> Storage:
+    return request.app.state.storage
+
+
+def get_dispatcher(request: Request) -> Dispatcher:
+    return request.app.state.dispatcher
+
+
+def get_principal(
+    request: Request, credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
+) -> Principal:
+    challenge = {"WWW-Authenticate": 'Bearer realm="graspgen"'}
+    if credentials is None or credentials.scheme.lower() != "bearer" or not credentials.credentials:
+        raise ApiError(401, "unauthorized", "a bearer token is required", headers=challenge)
+    tokens: TokenStore = request.app.state.tokens
+    principal = tokens.authenticate(credentials.credentials)
+    if principal is None:
+        raise ApiError(401, "unauthorized", "the bearer token is not valid", headers=challenge)
+    return principal
+
+
+def require(scope: str) -> Callable[[Principal], Principal]:
+    def _check(principal: Annotated[Principal, Depends(get_principal)]) -> Principal:
+        if not principal.has(scope):
+            raise ApiError(403, "forbidden", f"the token lacks the {scope!r} scope", required_scope=scope)
+        return principal
+
+    return _check
+
+
+SessionDep = Annotated[Session, Depends(get_session)]
+SettingsDep = Annotated[Settings, Depends(get_settings)]
+StorageDep = Annotated[Storage, Depends(get_storage)]
+DispatcherDep = Annotated[Dispatcher, Depends(get_dispatcher)]
+PrincipalDep = Annotated[Principal, Depends(get_principal)]
+ReadDep = Annotated[Principal, Depends(require("read"))]
+WriteDep = Annotated[Principal, Depends(require("write"))]
+AdminDep = Annotated[Principal, Depends(require("admin"))]

@@ -1,0 +1,313 @@
+"""Request and response bodies of the HTTP API (CONTRACT.md), with the examples the OpenAPI document shows."""
+
+from __future__ import annotations
+
+import uuid
+from datetime import datetime
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+SLUG = r"^[a-z0-9][a-z0-9._-]{0,62}$"
+
+_GRIPPER_EXAMPLE = {
+    "name": "pgn-80",
+    "stroke": 0.08,
+    "min_width": 0.0,
+    "finger_width": 0.02,
+    "finger_depth": 0.03,
+    "finger_thickness": 0.01,
+    "palm_depth": 0.02,
+    "palm_width": 0.02,
+    "friction": 0.5,
+    "pregrasp_clearance": 0.02,
+}
+_PARAMS_EXAMPLE = {"points": 10000, "safety_factor": 1.5, "rolls": 16, "k1": 16, "k2": 4, "seed": 0}
+
+
+class Links(BaseModel):
+    model_config = ConfigDict(extra="allow")
+    self: str
+
+
+# -- objects ----------------------------------------------------------------------------------------------------------
+class ObjectVersionOut(BaseModel):
+    model_config = ConfigDict(
+        json_schema_extra={
+            "example": {
+                "name": "ring-screw",
+                "version": 3,
+                "sha256": "9f2c...",
+                "units": "mm",
+                "format": "stl",
+                "size_bytes": 184284,
+                "extents": [0.042, 0.042, 0.018],
+                "watertight": True,
+                "warnings": [],
+                "created_at": "2026-11-23T16:00:00Z",
+                "links": {
+                    "self": "/v1/objects/ring-screw/versions/3",
+                    "file": "/v1/objects/ring-screw/versions/3/file",
+                },
+            }
+        }
+    )
+    name: str
+    version: int
+    sha256: str
+    units: str = Field(description="the unit the file was given in; stored data is in metres")
+    format: str
+    size_bytes: int
+    extents: list[float] = Field(description="bounding-box extents, metres")
+    watertight: bool
+    warnings: list[str]
+    created_at: datetime
+    links: dict[str, str]
+
+
+class ObjectOut(BaseModel):
+    name: str
+    latest_version: int
+    created_at: datetime
+    updated_at: datetime
+    versions: list[ObjectVersionOut]
+    links: dict[str, str]
+
+
+class ObjectSummary(BaseModel):
+    name: str
+    latest_version: int
+    updated_at: datetime
+    links: dict[str, str]
+
+
+class Page(BaseModel):
+    next_cursor: str | None = Field(None, description="pass as ?cursor= for the next page; null on the last page")
+    links: dict[str, str | None] = Field(default_factory=dict)
+
+
+class ObjectPage(Page):
+    items: list[ObjectSummary]
+
+
+# -- grippers ---------------------------------------------------------------------------------------------------------
+class GripperVersionOut(BaseModel):
+    model_config = ConfigDict(
+        json_schema_extra={
+            "example": {
+                "name": "pgn-80",
+                "version": 1,
+                "spec": _GRIPPER_EXAMPLE,
+                "created_at": "2026-11-23T16:00:00Z",
+                "links": {"self": "/v1/grippers/pgn-80/versions/1"},
+            }
+        }
+    )
+    name: str
+    version: int
+    spec: dict[str, Any]
+    created_at: datetime
+    links: dict[str, str]
+
+
+class GripperOut(BaseModel):
+    name: str
+    latest_version: int
+    created_at: datetime
+    updated_at: datetime
+    spec: dict[str, Any] = Field(description="the latest version's spec")
+    versions: list[GripperVersionOut]
+    links: dict[str, str]
+
+
+class GripperSummary(BaseModel):
+    name: str
+    latest_version: int
+    updated_at: datetime
+    links: dict[str, str]
+
+
+class GripperPage(Page):
+    items: list[GripperSummary]
+
+
+GRIPPER_SPEC_EXAMPLE = _GRIPPER_EXAMPLE
+
+
+# -- jobs -------------------------------------------------------------------------------------------------------------
+class JobRequest(BaseModel):
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {"object": "ring-screw", "gripper": "pgn-80", "params": _PARAMS_EXAMPLE},
+                {"kind": "cluster", "grasp_set": 17, "params": {"k1": 8, "k2": 2, "seed": 1}},
+            ]
+        },
+    )
+    kind: Literal["generate", "cluster"] = "generate"
+    object: str | None = Field(None, pattern=SLUG, description="object name (generate)")
+    object_version: int | None = Field(None, ge=1, description="default: the newest version")
+    gripper: str | None = Field(None, pattern=SLUG, description="gripper name (generate)")
+    gripper_version: int | None = Field(None, ge=1, description="default: the newest version")
+    grasp_set: int | None = Field(None, ge=1, description="cluster: the grasp set whose candidates are re-clustered")
+    params: dict[str, Any] | None = Field(
+        None,
+        description="generate: any of points, friction, safety_factor, rolls, k1, k2, inside, collision, seed; "
+        "cluster: k1, k2, seed",
+    )
+
+
+class BulkItem(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    object: str = Field(max_length=200)
+    object_version: int | None = None
+    gripper: str = Field(max_length=200)
+    gripper_version: int | None = None
+    params: dict[str, Any] | None = None
+
+
+class BulkRequest(BaseModel):
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "example": {
+                "items": [
+                    {"object": "ring-screw", "gripper": "pgn-80", "params": {"points": 5000}},
+                    {"object": "bracket-7", "gripper": "pgn-80"},
+                ]
+            }
+        },
+    )
+    items: list[BulkItem] = Field(min_length=1)
+
+
+class JobItem(BaseModel):
+    index: int
+    id: uuid.UUID
+    state: str
+    stage: str | None
+    progress: float
+    object: str | None
+    gripper: str | None
+    grasp_set: int | None
+    error: dict[str, Any] | None
+    links: dict[str, str]
+
+
+class JobOut(BaseModel):
+    model_config = ConfigDict(
+        json_schema_extra={
+            "example": {
+                "id": "4f1c7e4e-3c1a-4a59-9d1e-0b7f6f0b9a10",
+                "kind": "generate",
+                "state": "running",
+                "stage": "collision",
+                "progress": 0.62,
+                "grasp_set": None,
+                "error": None,
+                "object": "ring-screw",
+                "object_version": 3,
+                "gripper": "pgn-80",
+                "gripper_version": 1,
+                "params": {**_PARAMS_EXAMPLE, "friction": 0.5, "inside": False, "collision": "swept"},
+                "attempts": 1,
+                "created_at": "2026-11-23T16:00:00Z",
+                "started_at": "2026-11-23T16:00:01Z",
+                "finished_at": None,
+                "links": {"self": "/v1/jobs/4f1c7e4e-3c1a-4a59-9d1e-0b7f6f0b9a10"},
+            }
+        }
+    )
+    id: uuid.UUID
+    kind: str
+    state: Literal["queued", "running", "succeeded", "failed", "cancelled"]
+    stage: str | None
+    progress: float = Field(ge=0, le=1)
+    grasp_set: int | None = None
+    error: dict[str, Any] | None = Field(None, description="problem details of a failed job")
+    object: str | None = None
+    object_version: int | None = None
+    gripper: str | None = None
+    gripper_version: int | None = None
+    source_grasp_set: int | None = None
+    params: dict[str, Any] | None = None
+    request: dict[str, Any] | None = None
+    attempts: int = 0
+    cancel_requested: bool = False
+    parent: uuid.UUID | None = None
+    summary: dict[str, int] | None = Field(None, description="bulk: children per state")
+    items: list[JobItem] | None = Field(None, description="bulk: every item's state")
+    created_at: datetime
+    started_at: datetime | None = None
+    finished_at: datetime | None = None
+    links: dict[str, str]
+
+
+# -- grasp sets -------------------------------------------------------------------------------------------------------
+class GraspSetSummary(BaseModel):
+    model_config = ConfigDict(
+        json_schema_extra={
+            "example": {
+                "id": 17,
+                "object": "ring-screw",
+                "object_version": 3,
+                "gripper": "pgn-80",
+                "gripper_version": 1,
+                "version": 2,
+                "params": {**_PARAMS_EXAMPLE, "friction": 0.5, "inside": False, "collision": "swept"},
+                "derived_from": None,
+                "job": "4f1c7e4e-3c1a-4a59-9d1e-0b7f6f0b9a10",
+                "grasp_count": 64,
+                "sha256": "5be1...",
+                "etag": '"5be1..."',
+                "created_at": "2026-11-23T16:00:04Z",
+                "links": {
+                    "self": "/v1/grasp-sets/17",
+                    "candidates": "/v1/grasp-sets/17/candidates",
+                    "recording": "/v1/grasp-sets/17/recording",
+                    "grasps": "/v1/grasp-sets/17/grasps",
+                    "catalogue": "/v1/catalogue/ring-screw/pgn-80?version=2",
+                },
+            }
+        }
+    )
+    id: int
+    object: str
+    object_version: int
+    gripper: str
+    gripper_version: int
+    version: int = Field(description="numbered per (object, gripper) pair; the highest is the newest")
+    params: dict[str, Any]
+    derived_from: int | None
+    job: uuid.UUID
+    grasp_count: int
+    sha256: str = Field(description="sha256 of the export bytes (the strong ETag without quotes)")
+    etag: str
+    created_at: datetime
+    links: dict[str, str]
+
+
+class GraspSetPage(Page):
+    items: list[GraspSetSummary]
+
+
+class GraspOut(BaseModel):
+    rank: int
+    pose: list[list[float]]
+    width: float
+    contacts: list[list[float]]
+    normals: list[list[float]]
+    friction_margin_deg: float
+    free_rolls_deg: list[float]
+    cluster: list[int]
+    cluster_size: int
+
+
+class GraspPage(Page):
+    items: list[GraspOut]
+
+
+class Health(BaseModel):
+    status: str
+    checks: dict[str, str] = Field(default_factory=dict)

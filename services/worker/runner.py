@@ -1,0 +1,478 @@
+"""Runs one job: claim the row, fetch inputs, call graspgen, store artifacts, commit the result in one transaction.
+
+Idempotent by job id: a finished job is never run again, and the grasp set is tied to the job by a unique column, so
+a redelivered message can never add a second grasp-set version. Artifacts go to storage before the transaction that
+makes them visible commits, so a reader never sees a grasp set whose files are missing.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import socket
+import tempfile
+import time
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from celery.exceptions import SoftTimeLimitExceeded
+from sqlalchemy import func, insert, select, update
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session
+
+from services.common import jobs
+from services.common.db import Database
+from services.common.models import (
+    TERMINAL_STATES,
+    Grasp,
+    GraspSet,
+    Gripper,
+    GripperVersion,
+    Job,
+    ObjectModel,
+    ObjectVersion,
+    utcnow,
+)
+from services.common.settings import Settings
+from services.common.storage import Storage, make_storage
+
+__all__ = ["JobRunner", "STAGE_WEIGHTS"]
+
+log = logging.getLogger(__name__)
+
+#: share of a job's progress bar per core stage (the core reports a fraction within each stage)
+STAGE_WEIGHTS: dict[str, dict[str, float]] = {
+    "generate": {"load": 0.02, "sample": 0.08, "pairs": 0.35, "collision": 0.40, "cluster": 0.10, "export": 0.05},
+    "cluster": {"load": 0.05, "cluster": 0.85, "export": 0.10},
+}
+
+
+class _TimeLimitError(Exception):
+    pass
+
+
+@dataclass(frozen=True)
+class _Inputs:
+    job_id: uuid.UUID
+    kind: str
+    attempt: int
+    params: dict[str, Any]
+    object_name: str
+    object_version: int
+    object_version_id: int
+    object_id: int
+    object_sha256: str
+    object_file_key: str
+    object_format: str
+    units: str
+    gripper_name: str
+    gripper_version: int
+    gripper_version_id: int
+    gripper_id: int
+    spec: dict[str, Any]
+    source_grasp_set_id: int | None
+    source_export_key: str | None
+    source_candidates_key: str | None
+    params_key: str
+
+
+class JobRunner:
+    def __init__(self, db: Database, storage: Storage, settings: Settings) -> None:
+        self.db = db
+        self.storage = storage
+        self.settings = settings
+
+    @classmethod
+    def from_settings(cls, settings: Settings) -> JobRunner:
+        return cls(Database(settings), make_storage(settings), settings)
+
+    # -- entry point ----------------------------------------------------------------------------------------------
+    def run(self, job_id: str) -> str:
+        jid = uuid.UUID(str(job_id))
+        claimed = self._claim(jid)
+        if isinstance(claimed, str):
+            return claimed
+        inputs = claimed
+        started = time.monotonic()
+        try:
+            with tempfile.TemporaryDirectory(prefix="graspgen-job-") as tmp:
+                result = self._execute(inputs, Path(tmp))
+                return self._commit_result(inputs, *result)
+        except (SoftTimeLimitExceeded, _TimeLimitError):
+            limit = self.settings.job_soft_time_limit_s
+            return self._end(
+                jid, "failed", jobs.problem("time-limit", "Time limit exceeded", f"the job ran longer than {limit} s")
+            )
+        except Exception as exc:
+            from graspgen.errors import Cancelled, GraspgenError
+
+            if isinstance(exc, Cancelled):
+                return self._end(jid, "cancelled")
+            if isinstance(exc, GraspgenError):
+                err = jobs.problem(
+                    exc.code, "Invalid input", exc.message, **({"field": exc.field} if exc.field else {})
+                )
+                return self._end(jid, "failed", err)
+            log.exception("job %s failed after %.1f s", jid, time.monotonic() - started)
+            return self._end(
+                jid,
+                "failed",
+                jobs.problem("internal-error", "Internal error", "the job failed; see the worker log", status=500),
+            )
+
+    def fail_time_limit(self, job_id: str) -> None:
+        limit = self.settings.job_time_limit_s
+        self._end(
+            uuid.UUID(job_id),
+            "failed",
+            jobs.problem("time-limit", "Time limit exceeded", f"the job was killed after {limit} s"),
+        )
+
+    # -- claim ----------------------------------------------------------------------------------------------------
+    def _claim(self, jid: uuid.UUID) -> _Inputs | str:
+        with self.db.session() as s:
+            job = s.execute(select(Job).where(Job.id == jid).with_for_update()).scalar_one_or_none()
+            if job is None:
+                log.warning("job %s does not exist; message dropped", jid)
+                return "missing"
+            if job.state in TERMINAL_STATES:
+                return job.state  # a redelivery of a finished job
+            if job.kind == "bulk":
+                return job.state  # parents are aggregates, never run
+            if job.cancel_requested:
+                jobs.finish(job, "cancelled")
+                self._parent(s, job)
+                return "cancelled"
+            if job.attempts >= self.settings.job_max_attempts:
+                jobs.finish(
+                    job,
+                    "failed",
+                    jobs.problem(
+                        "worker-lost",
+                        "Worker lost",
+                        f"the job was started {job.attempts} times and never finished",
+                        status=500,
+                    ),
+                )
+                self._parent(s, job)
+                return "failed"
+            ov = s.get(ObjectVersion, job.object_version_id)
+            gv = s.get(GripperVersion, job.gripper_version_id)
+            if ov is None or gv is None or job.params is None:
+                jobs.finish(job, "failed", jobs.problem("invalid-job", "Invalid job", "the job lacks its inputs"))
+                self._parent(s, job)
+                return "failed"
+            source = s.get(GraspSet, job.source_grasp_set_id) if job.source_grasp_set_id else None
+            key = jobs.params_key(job.params, job.source_grasp_set_id)
+            existing = s.execute(
+                select(GraspSet.id).where(
+                    GraspSet.object_version_id == ov.id,
+                    GraspSet.gripper_version_id == gv.id,
+                    GraspSet.params_key == key,
+                )
+            ).scalar_one_or_none()
+            if existing is not None:
+                # the same inputs were computed before: one grasp set per object x gripper x parameters
+                job.grasp_set_id = existing
+                job.attempts += 1
+                job.started_at = job.started_at or utcnow()
+                jobs.finish(job, "succeeded")
+                self._parent(s, job)
+                return "succeeded"
+            job.state = "running"
+            job.attempts += 1
+            job.started_at = job.started_at or utcnow()
+            job.stage = "load"
+            job.progress = 0.0
+            job.error = None
+            self._parent(s, job)
+            obj_name = s.execute(select(ObjectModel.name).where(ObjectModel.id == ov.object_id)).scalar_one()
+            grip_name = s.execute(select(Gripper.name).where(Gripper.id == gv.gripper_id)).scalar_one()
+            return _Inputs(
+                job_id=jid,
+                kind=job.kind,
+                attempt=job.attempts,
+                params=dict(job.params),
+                object_name=obj_name,
+                object_version=ov.version,
+                object_version_id=ov.id,
+                object_id=ov.object_id,
+                object_sha256=ov.sha256,
+                object_file_key=ov.file_key,
+                object_format=ov.format,
+                units=ov.units,
+                gripper_name=grip_name,
+                gripper_version=gv.version,
+                gripper_version_id=gv.id,
+                gripper_id=gv.gripper_id,
+                spec=dict(gv.spec),
+                source_grasp_set_id=source.id if source else None,
+                source_export_key=source.export_key if source else None,
+                source_candidates_key=source.candidates_key if source else None,
+                params_key=key,
+            )
+
+    # -- execution ------------------------------------------------------------------------------------------------
+    def _execute(self, inp: _Inputs, tmp: Path) -> tuple[bytes, dict[str, Any], list[dict[str, Any]], Path, Path]:
+        import rerun as rr
+
+        import graspgen
+
+        progress = _Progress(self, inp)
+        rrd = tmp / "run.rrd"
+        rec = rr.RecordingStream("graspgen", recording_id=str(inp.job_id))
+        rec.save(rrd)
+        try:
+            rec.log("job", rr.TextDocument(self._metadata_markdown(inp), media_type=rr.MediaType.MARKDOWN), static=True)
+            progress("load", 0.0)
+            if inp.kind == "generate":
+                part = tmp / f"part.{inp.object_format}"  # the format is a whitelisted token, never a user path
+                self.storage.download(inp.object_file_key, part)
+                p = inp.params
+                gs = graspgen.generate(
+                    str(part),
+                    inp.spec,
+                    units=inp.units,
+                    points=p["points"],
+                    friction=p["friction"],
+                    safety_factor=p["safety_factor"],
+                    rolls=p["rolls"],
+                    k1=p["k1"],
+                    k2=p["k2"],
+                    inside=p["inside"],
+                    collision=p["collision"],
+                    seed=p["seed"],
+                    recording=rec,
+                    progress=progress,
+                    object_name=inp.object_name,
+                    object_version=inp.object_version,
+                )
+            elif inp.kind == "cluster":
+                assert inp.source_candidates_key and inp.source_export_key
+                npz = self.storage.download(inp.source_candidates_key, tmp / "source-candidates.npz")
+                previous = json.loads(self.storage.get_bytes(inp.source_export_key))
+                gs = graspgen.recluster(
+                    str(npz),
+                    previous,
+                    k1=inp.params["k1"],
+                    k2=inp.params["k2"],
+                    seed=inp.params["seed"],
+                    recording=rec,
+                    progress=progress,
+                )
+            else:
+                raise ValueError(f"unknown job kind {inp.kind!r}")
+            progress("export", 1.0)
+            export_bytes = gs.to_json_bytes()
+            candidates = tmp / "candidates.npz"
+            gs.save_candidates(candidates)
+            rec.log(
+                "job/result",
+                rr.TextDocument(json.dumps({"grasps": len(gs.grasps), "stats": gs.stats}, indent=2, default=str)),
+                static=True,
+            )
+        finally:
+            rec.flush()
+            rec.disconnect()  # finalises the .rrd (footer) now rather than at garbage collection
+        return export_bytes, gs.stats, gs.grasps, candidates, rrd
+
+    def _metadata_markdown(self, inp: _Inputs) -> str:
+        meta = {
+            "job": str(inp.job_id),
+            "kind": inp.kind,
+            "attempt": inp.attempt,
+            "object": {
+                "name": inp.object_name,
+                "version": inp.object_version,
+                "sha256": inp.object_sha256,
+                "source_units": inp.units,
+            },
+            "gripper": {"name": inp.gripper_name, "version": inp.gripper_version},
+            "params": inp.params,
+            "derived_from": inp.source_grasp_set_id,
+            "host": socket.gethostname(),
+            "started_at": utcnow().isoformat(),
+        }
+        return "# graspgen job\n\n```json\n" + json.dumps(meta, indent=2) + "\n```\n"
+
+    # -- result ---------------------------------------------------------------------------------------------------
+    def _commit_result(
+        self,
+        inp: _Inputs,
+        export_bytes: bytes,
+        stats: dict[str, Any],
+        grasps: list[dict[str, Any]],
+        candidates: Path,
+        rrd: Path,
+    ) -> str:
+        export_blob = self.storage.put_bytes(export_bytes)
+        candidates_blob = self.storage.put_file(candidates)
+        rrd_blob = self.storage.put_file(rrd)
+        for attempt in range(3):
+            try:
+                with self.db.session() as s:
+                    job = s.execute(select(Job).where(Job.id == inp.job_id).with_for_update()).scalar_one_or_none()
+                    if job is None or job.state in TERMINAL_STATES:
+                        return job.state if job else "missing"
+                    if job.cancel_requested:
+                        jobs.finish(job, "cancelled")
+                        self._parent(s, job)
+                        return "cancelled"
+                    existing = (
+                        s.execute(
+                            select(GraspSet.id).where(
+                                (GraspSet.job_id == inp.job_id)
+                                | (
+                                    (GraspSet.object_version_id == inp.object_version_id)
+                                    & (GraspSet.gripper_version_id == inp.gripper_version_id)
+                                    & (GraspSet.params_key == inp.params_key)
+                                )
+                            )
+                        )
+                        .scalars()
+                        .first()
+                    )
+                    if existing is None:
+                        existing = self._insert_grasp_set(
+                            s, inp, export_blob, candidates_blob.key, rrd_blob.key, stats, grasps
+                        )
+                    job.grasp_set_id = existing
+                    jobs.finish(job, "succeeded")
+                    self._parent(s, job)
+                    return "succeeded"
+            except IntegrityError:
+                # another delivery or an identical job committed first; the next pass links to its grasp set
+                if attempt == 2:
+                    raise
+        raise AssertionError("unreachable")
+
+    def _insert_grasp_set(
+        self,
+        s: Session,
+        inp: _Inputs,
+        export_blob,
+        candidates_key: str,
+        rrd_key: str,
+        stats: dict[str, Any],
+        grasps: list[dict[str, Any]],
+    ) -> int:  # type: ignore[no-untyped-def]
+        # the object row serialises version numbering for all of its grasp sets
+        s.execute(select(ObjectModel.id).where(ObjectModel.id == inp.object_id).with_for_update())
+        version = (
+            s.execute(
+                select(func.max(GraspSet.version)).where(
+                    GraspSet.object_id == inp.object_id, GraspSet.gripper_id == inp.gripper_id
+                )
+            ).scalar_one_or_none()
+            or 0
+        ) + 1
+        gs = GraspSet(
+            object_id=inp.object_id,
+            gripper_id=inp.gripper_id,
+            version=version,
+            object_version_id=inp.object_version_id,
+            gripper_version_id=inp.gripper_version_id,
+            params=inp.params,
+            params_key=inp.params_key,
+            derived_from_id=inp.source_grasp_set_id,
+            job_id=inp.job_id,
+            stats=stats,
+            grasp_count=len(grasps),
+            export_key=export_blob.key,
+            export_sha256=export_blob.sha256,
+            export_size=export_blob.size,
+            candidates_key=candidates_key,
+            recording_key=rrd_key,
+        )
+        s.add(gs)
+        s.flush()
+        if grasps:
+            s.execute(insert(Grasp), [_grasp_row(gs.id, rank, g) for rank, g in enumerate(grasps)])
+        return gs.id
+
+    def _end(self, jid: uuid.UUID, state: str, error: dict[str, Any] | None = None) -> str:
+        with self.db.session() as s:
+            job = s.execute(select(Job).where(Job.id == jid).with_for_update()).scalar_one_or_none()
+            if job is None:
+                return "missing"
+            if job.state in TERMINAL_STATES:
+                return job.state
+            jobs.finish(job, state, error=error)
+            self._parent(s, job)
+            return state
+
+    def _parent(self, s: Session, job: Job) -> None:
+        if job.parent_id is not None:
+            s.flush()
+            jobs.refresh_parent(s, job.parent_id)
+
+    # -- progress -------------------------------------------------------------------------------------------------
+    def write_progress(self, jid: uuid.UUID, stage: str, progress: float) -> bool:
+        """Store stage and progress; return whether cancellation was requested."""
+        with self.db.session() as s:
+            row = s.execute(
+                update(Job)
+                .where(Job.id == jid, Job.state == "running")
+                .values(stage=stage, progress=progress, updated_at=utcnow())
+                .returning(Job.cancel_requested)
+            ).first()
+            if row is None:
+                # no longer running: cancelled while queued-and-claimed, or finished by another delivery
+                return True
+            return bool(row[0])
+
+
+class _Progress:
+    """The core's progress callback: throttled writes to the job row, the cancel flag and the deadline."""
+
+    def __init__(self, runner: JobRunner, inp: _Inputs) -> None:
+        self.runner = runner
+        self.jid = inp.job_id
+        self.weights = STAGE_WEIGHTS.get(inp.kind, STAGE_WEIGHTS["generate"])
+        self.interval = runner.settings.progress_interval_s
+        self.deadline = time.monotonic() + runner.settings.job_soft_time_limit_s
+        self.last_stage: str | None = None
+        self.last_write = 0.0
+        self.value = 0.0
+
+    def _overall(self, stage: str, fraction: float) -> float:
+        if stage not in self.weights:
+            return self.value
+        before = 0.0
+        for name, w in self.weights.items():
+            if name == stage:
+                return before + w * min(max(float(fraction), 0.0), 1.0)
+            before += w
+        return self.value
+
+    def __call__(self, stage: str, fraction: float) -> None:
+        from graspgen.errors import Cancelled
+
+        now = time.monotonic()
+        if now > self.deadline:
+            raise _TimeLimitError()
+        self.value = max(self.value, min(self._overall(stage, fraction), 0.99))
+        if stage == self.last_stage and now - self.last_write < self.interval:
+            return
+        self.last_stage, self.last_write = stage, now
+        if self.runner.write_progress(self.jid, stage, round(self.value, 4)):
+            raise Cancelled(f"job {self.jid} was cancelled")
+
+
+def _grasp_row(grasp_set_id: int, rank: int, g: dict[str, Any]) -> dict[str, Any]:
+    cluster = g.get("cluster") or [0, 0]
+    return {
+        "grasp_set_id": grasp_set_id,
+        "rank": rank,
+        "pose": g["pose"],
+        "width": float(g["width"]),
+        "contacts": g["contacts"],
+        "normals": g["normals"],
+        "friction_margin_deg": float(g["friction_margin_deg"]),
+        "free_rolls_deg": g["free_rolls_deg"],
+        "cluster_translation": int(cluster[0]),
+        "cluster_direction": int(cluster[1]),
+        "cluster_size": int(g.get("cluster_size", 1)),
+    }

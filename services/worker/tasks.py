@@ -1,0 +1,52 @@
+"""The one task: run a job by id. The same function runs under `graspgen worker` and in the embedded thread pool."""
+
+from __future__ import annotations
+
+import logging
+import threading
+
+from celery import Task
+from celery.exceptions import TimeLimitExceeded
+
+from services.common.settings import Settings
+from services.worker.celery_app import celery_app
+from services.worker.runner import JobRunner
+
+__all__ = ["run_job", "get_runner", "set_runner"]
+
+log = logging.getLogger(__name__)
+
+_runner: JobRunner | None = None
+_runner_lock = threading.Lock()
+
+
+def set_runner(runner: JobRunner | None) -> None:
+    """The embedded mode installs the API process's runner (sharing its engine and storage)."""
+    global _runner
+    _runner = runner
+
+
+def get_runner() -> JobRunner:
+    # built lazily, so that a prefork child opens its own database connections after the fork
+    global _runner
+    with _runner_lock:
+        if _runner is None:
+            settings: Settings = celery_app.conf.graspgen_settings
+            _runner = JobRunner.from_settings(settings)
+        return _runner
+
+
+class JobTask(Task):
+    def on_failure(self, exc, task_id, args, kwargs, einfo):  # type: ignore[no-untyped-def]
+        # a hard time limit kills the child process; this hook then runs in the worker's main process
+        if isinstance(exc, TimeLimitExceeded) and args:
+            try:
+                get_runner().fail_time_limit(str(args[0]))
+            except Exception:  # the database may be what is failing; the job then stays for the next delivery
+                log.exception("could not mark job %s failed after the hard time limit", args[0])
+
+
+@celery_app.task(name="graspgen.run_job", base=JobTask, bind=True)
+def run_job(self: Task, job_id: str) -> str:
+    """Run job `job_id` and return its final state. Redelivery of a finished job does nothing."""
+    return get_runner().run(job_id)
