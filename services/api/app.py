@@ -1,0 +1,105 @@
+"""The FastAPI application: `create_app(settings)` wires database, storage, tokens and the job dispatcher."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+from fastapi import FastAPI
+from fastapi.openapi.utils import get_openapi
+
+from services.common.db import Database, redacted_url
+from services.common.settings import Settings, get_settings
+from services.common.storage import make_storage
+from services.common.tokens import TokenStore
+from services.worker.dispatch import Dispatcher, EmbeddedDispatcher, make_dispatcher
+
+from .limits import MULTIPART_OVERHEAD, BodyLimitMiddleware
+from .problems import install_problem_handlers, problem_schema
+from .routers import grasp_sets, grippers, health, jobs, objects
+
+__all__ = ["create_app"]
+
+log = logging.getLogger(__name__)
+
+DESCRIPTION = """\
+Grasps for parallel-jaw grippers as a service (CONTRACT.md, HTTP API). Every length is in metres.
+
+* Upload parts (`/v1/objects`) and gripper specs (`/v1/grippers`), submit jobs (`/v1/jobs`, `/v1/bulk-jobs`),
+  poll them, then read immutable grasp-set versions (`/v1/grasp-sets/{id}`) or the catalogue (`/v1/catalogue`).
+* Errors are RFC 9457 `application/problem+json`.
+* Authentication: `Authorization: Bearer <token>`; scopes `read` < `write` < `admin`.
+"""
+
+
+def create_app(
+    settings: Settings | None = None, *, dispatcher: Dispatcher | None = None, recover_jobs: bool = True
+) -> FastAPI:
+    settings = settings or get_settings()
+    db = Database(settings)
+    storage = make_storage(settings)
+    tokens = TokenStore(settings.tokens_path)  # fails fast on a missing or malformed tokens file
+    dispatcher = dispatcher or make_dispatcher(settings, db, storage)
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        log.info(
+            "database %s, jobs %s, storage %s",
+            redacted_url(db.url),
+            "in-process" if settings.embedded_worker else f"Celery queue {settings.queue!r}",
+            settings.storage_url or settings.storage_dir,
+        )
+        if recover_jobs and isinstance(dispatcher, EmbeddedDispatcher):
+            n = dispatcher.recover()
+            if n:
+                log.info("re-queued %d unfinished job(s) from the previous run", n)
+        try:
+            yield
+        finally:
+            dispatcher.close()
+            db.dispose()
+
+    app = FastAPI(
+        title="graspgen",
+        version="1",
+        description=DESCRIPTION,
+        lifespan=lifespan,
+        openapi_tags=[
+            {"name": "objects", "description": "Parts, versioned by content"},
+            {"name": "grippers", "description": "Gripper specs, versioned"},
+            {"name": "jobs", "description": "Asynchronous generate, cluster and bulk jobs"},
+            {"name": "grasp sets", "description": "Immutable grasp-set versions and their artifacts"},
+            {"name": "catalogue", "description": "Newest grasp sets per object and gripper, for fleets"},
+            {"name": "health", "description": "Liveness and readiness"},
+        ],
+    )
+    app.state.settings = settings
+    app.state.db = db
+    app.state.storage = storage
+    app.state.tokens = tokens
+    app.state.dispatcher = dispatcher
+    install_problem_handlers(app)
+    for r in (objects.router, grippers.router, jobs.router, grasp_sets.router, health.router):
+        app.include_router(r)
+    app.add_middleware(
+        BodyLimitMiddleware,
+        default_limit=settings.max_json_bytes,
+        limits={("POST", "/v1/objects"): settings.max_upload_bytes + MULTIPART_OVERHEAD},
+    )
+
+    def openapi() -> dict:
+        if app.openapi_schema is None:
+            schema = get_openapi(
+                title=app.title,
+                version=app.version,
+                description=app.description,
+                routes=app.routes,
+                tags=app.openapi_tags,
+            )
+            schema.setdefault("components", {}).setdefault("schemas", {})["Problem"] = problem_schema()
+            app.openapi_schema = schema
+        return app.openapi_schema
+
+    app.openapi = openapi  # type: ignore[method-assign]
+    return app

@@ -1,0 +1,199 @@
+"""Grasp sets (immutable versions), their grasps, and the fleet catalogue built on them."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from datetime import datetime
+from typing import Any
+
+from sqlalchemy import Select, func, select
+from sqlalchemy.orm import Session
+
+from services.common.models import Grasp, GraspSet, Gripper, GripperVersion, ObjectModel, ObjectVersion
+
+from ..pagination import decode_cursor, encode_cursor
+from ..problems import ApiError
+
+__all__ = [
+    "summary_select",
+    "summary_out",
+    "list_grasp_sets",
+    "get_grasp_set",
+    "catalogue_entry",
+    "list_catalogue",
+    "list_grasps",
+    "etag_of",
+]
+
+
+def etag_of(sha256: str) -> str:
+    return f'"{sha256}"'
+
+
+def summary_select() -> Select:
+    return (
+        select(GraspSet, ObjectModel.name, ObjectVersion.version, Gripper.name, GripperVersion.version)
+        .join(ObjectModel, ObjectModel.id == GraspSet.object_id)
+        .join(ObjectVersion, ObjectVersion.id == GraspSet.object_version_id)
+        .join(Gripper, Gripper.id == GraspSet.gripper_id)
+        .join(GripperVersion, GripperVersion.id == GraspSet.gripper_version_id)
+    )
+
+
+def summary_out(row: Any) -> dict[str, Any]:
+    gs, obj, obj_v, grip, grip_v = row
+    base = f"/v1/grasp-sets/{gs.id}"
+    return {
+        "id": gs.id,
+        "object": obj,
+        "object_version": obj_v,
+        "gripper": grip,
+        "gripper_version": grip_v,
+        "version": gs.version,
+        "params": gs.params,
+        "derived_from": gs.derived_from_id,
+        "job": gs.job_id,
+        "grasp_count": gs.grasp_count,
+        "sha256": gs.export_sha256,
+        "etag": etag_of(gs.export_sha256),
+        "created_at": gs.created_at,
+        "links": {
+            "self": base,
+            "candidates": base + "/candidates",
+            "recording": base + "/recording",
+            "grasps": base + "/grasps",
+            "catalogue": f"/v1/catalogue/{obj}/{grip}?version={gs.version}",
+        },
+    }
+
+
+def _id_of(session: Session, model: type, name: str, what: str, status: int = 404) -> int:
+    i = session.execute(select(model.id).where(model.name == name)).scalar_one_or_none()
+    if i is None:
+        raise ApiError(status, "not-found", f"no {what} named {name!r}")
+    return i
+
+
+def list_grasp_sets(
+    session: Session, *, object: str | None, gripper: str | None, cursor: str | None, limit: int
+) -> dict[str, Any]:
+    key = decode_cursor(cursor, (int,))
+    q = summary_select()
+    if object:
+        q = q.where(ObjectModel.name == object)
+    if gripper:
+        q = q.where(Gripper.name == gripper)
+    if key:
+        q = q.where(GraspSet.id < key[0])
+    rows = session.execute(q.order_by(GraspSet.id.desc()).limit(limit + 1)).all()
+    more = len(rows) > limit
+    rows = rows[:limit]
+    nxt = encode_cursor([rows[-1][0].id]) if more and rows else None
+    query = "".join(f"&{k}={v}" for k, v in (("object", object), ("gripper", gripper)) if v)
+    return {
+        "items": [summary_out(r) for r in rows],
+        "next_cursor": nxt,
+        "links": {"next": f"/v1/grasp-sets?cursor={nxt}&limit={limit}{query}" if nxt else None},
+    }
+
+
+def get_grasp_set(session: Session, grasp_set_id: int) -> GraspSet:
+    gs = session.get(GraspSet, grasp_set_id)
+    if gs is None:
+        raise ApiError(404, "not-found", f"no grasp set {grasp_set_id}")
+    return gs
+
+
+def catalogue_entry(session: Session, object: str, gripper: str, version: int | None) -> GraspSet:
+    obj_id = _id_of(session, ObjectModel, object, "object")
+    grip_id = _id_of(session, Gripper, gripper, "gripper")
+    q = select(GraspSet).where(GraspSet.object_id == obj_id, GraspSet.gripper_id == grip_id)
+    q = q.where(GraspSet.version == version) if version else q.order_by(GraspSet.version.desc()).limit(1)
+    gs = session.execute(q).scalars().first()
+    if gs is None:
+        what = f"version {version}" if version else "grasp set"
+        raise ApiError(404, "not-found", f"no {what} for object {object!r} with gripper {gripper!r}")
+    return gs
+
+
+def list_catalogue(
+    session: Session, *, gripper: str, updated_since: datetime | None, cursor: str | None, limit: int
+) -> tuple[dict[str, Any], str]:
+    """The newest grasp set of every object for `gripper`, by object name; returns (body, strong ETag)."""
+    key = decode_cursor(cursor, (str,))
+    grip_id = _id_of(session, Gripper, gripper, "gripper")
+    newest = (
+        select(GraspSet.object_id.label("object_id"), func.max(GraspSet.version).label("version"))
+        .where(GraspSet.gripper_id == grip_id)
+        .group_by(GraspSet.object_id)
+        .subquery()
+    )
+    q = (
+        summary_select()
+        .join(newest, (newest.c.object_id == GraspSet.object_id) & (newest.c.version == GraspSet.version))
+        .where(GraspSet.gripper_id == grip_id)
+    )
+    if updated_since is not None:
+        q = q.where(GraspSet.created_at > updated_since)
+    if key:
+        q = q.where(ObjectModel.name > key[0])
+    rows = session.execute(q.order_by(ObjectModel.name).limit(limit + 1)).all()
+    more = len(rows) > limit
+    rows = rows[:limit]
+    nxt = encode_cursor([rows[-1][1]]) if more and rows else None
+    since = f"&updated_since={updated_since.isoformat()}" if updated_since else ""
+    body = {
+        "gripper": gripper,
+        "items": [summary_out(r) for r in rows],
+        "next_cursor": nxt,
+        "links": {"next": f"/v1/catalogue?gripper={gripper}{since}&cursor={nxt}&limit={limit}" if nxt else None},
+    }
+    # the page is a function of its grasp-set ids and export hashes, so hashing those is a strong validator
+    basis = json.dumps([gripper, nxt, [(r[0].id, r[0].export_sha256) for r in rows]]).encode()
+    return body, etag_of(hashlib.sha256(basis).hexdigest())
+
+
+def list_grasps(
+    session: Session,
+    grasp_set_id: int,
+    *,
+    min_width: float | None,
+    max_width: float | None,
+    min_friction_margin_deg: float | None,
+    cursor: str | None,
+    limit: int,
+) -> dict[str, Any]:
+    get_grasp_set(session, grasp_set_id)
+    key = decode_cursor(cursor, (int,))
+    q = select(Grasp).where(Grasp.grasp_set_id == grasp_set_id)
+    if min_width is not None:
+        q = q.where(Grasp.width >= min_width)
+    if max_width is not None:
+        q = q.where(Grasp.width <= max_width)
+    if min_friction_margin_deg is not None:
+        q = q.where(Grasp.friction_margin_deg >= min_friction_margin_deg)
+    if key:
+        q = q.where(Grasp.rank > key[0])
+    rows = session.execute(q.order_by(Grasp.rank).limit(limit + 1)).scalars().all()
+    more = len(rows) > limit
+    rows = rows[:limit]
+    nxt = encode_cursor([rows[-1].rank]) if more and rows else None
+    return {
+        "items": [
+            {
+                "rank": g.rank,
+                "pose": g.pose,
+                "width": g.width,
+                "contacts": g.contacts,
+                "normals": g.normals,
+                "friction_margin_deg": g.friction_margin_deg,
+                "free_rolls_deg": g.free_rolls_deg,
+                "cluster": [g.cluster_translation, g.cluster_direction],
+                "cluster_size": g.cluster_size,
+            }
+            for g in rows
+        ],
+        "next_cursor": nxt,
+        "links": {"next": f"/v1/grasp-sets/{grasp_set_id}/grasps?cursor={nxt}&limit={limit}" if nxt else None},
+    }

@@ -1,0 +1,56 @@
+"""Conditional requests and artifact responses (strong ETags, immutable caching)."""
+
+from __future__ import annotations
+
+from fastapi import Request, Response
+from fastapi.responses import StreamingResponse
+
+from services.common.storage import Storage
+
+from .problems import ApiError
+
+__all__ = ["IMMUTABLE", "REVALIDATE", "not_modified", "etag_matches", "blob_response", "blob_etag"]
+
+IMMUTABLE = "private, max-age=31536000, immutable"
+REVALIDATE = "private, no-cache"
+
+
+def etag_matches(request: Request, etag: str) -> bool:
+    """If-None-Match uses the weak comparison (RFC 9110 13.1.2): W/ prefixes are ignored."""
+    header = request.headers.get("if-none-match")
+    if not header:
+        return False
+    if header.strip() == "*":
+        return True
+    want = etag.removeprefix("W/")
+    return any(tag.strip().removeprefix("W/") == want for tag in header.split(","))
+
+
+def not_modified(etag: str, cache_control: str) -> Response:
+    return Response(status_code=304, headers={"ETag": etag, "Cache-Control": cache_control})
+
+
+def blob_etag(key: str) -> str:
+    # keys are sha256/<2>/<64 hex>: the digest is the content's identity
+    return f'"{key.rsplit("/", 1)[-1]}"'
+
+
+def blob_response(
+    request: Request, storage: Storage, key: str | None, *, media_type: str, filename: str, cache_control: str
+) -> Response:
+    if key is None:
+        raise ApiError(404, "not-found", "this artifact was not stored")
+    etag = blob_etag(key)
+    if etag_matches(request, etag):
+        return not_modified(etag, cache_control)
+    try:
+        size = storage.size(key)
+    except FileNotFoundError:
+        raise ApiError(404, "not-found", "the artifact is missing from storage") from None
+    headers = {
+        "ETag": etag,
+        "Cache-Control": cache_control,
+        "Content-Length": str(size),
+        "Content-Disposition": f'attachment; filename="{filename}"',
+    }
+    return StreamingResponse(storage.iter_chunks(key), media_type=media_type, headers=headers)

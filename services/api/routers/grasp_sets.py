@@ -1,0 +1,213 @@
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Path, Query, Request, Response
+
+from services.common.models import GraspSet
+from services.common.storage import Storage
+
+from ..crud import grasp_sets as crud
+from ..deps import ReadDep, SessionDep, SettingsDep, StorageDep
+from ..http import IMMUTABLE, REVALIDATE, blob_response, etag_matches, not_modified
+from ..problems import ApiError
+from ..schemas import SLUG, GraspPage, GraspSetPage
+from . import problems
+
+router = APIRouter(prefix="/v1", tags=["grasp sets"])
+
+GraspSetId = Annotated[int, Path(ge=1, examples=[17])]
+
+_EXPORT_RESPONSE: dict[int | str, dict[str, Any]] = {
+    200: {
+        "description": "The grasp_set/1 export (CONTRACT.md), byte for byte as the core wrote it",
+        "content": {
+            "application/json": {
+                "example": {
+                    "format": "graspgen.grasp_set/1",
+                    "units": "m",
+                    "object": {"name": "ring-screw", "version": 3, "sha256": "...", "source_units": "mm"},
+                    "gripper": {"name": "pgn-80", "stroke": 0.08, "...": "..."},
+                    "params": {"points": 10000, "k1": 16, "k2": 4, "seed": 0, "...": "..."},
+                    "stats": {"points": 10000, "candidates": 812, "...": "..."},
+                    "grasps": [{"pose": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], "width": 0.031}],
+                }
+            }
+        },
+        "headers": {"ETag": {"description": "strong: the sha256 of the body", "schema": {"type": "string"}}},
+    }
+}
+
+
+def export_response(request: Request, storage: Storage, gs: GraspSet, *, cache_control: str) -> Response:
+    etag = crud.etag_of(gs.export_sha256)
+    headers = {"ETag": etag, "Cache-Control": cache_control, "Content-Location": f"/v1/grasp-sets/{gs.id}"}
+    if etag_matches(request, etag):
+        return not_modified(etag, cache_control)
+    try:
+        body = storage.get_bytes(gs.export_key)
+    except FileNotFoundError:
+        raise ApiError(503, "artifact-missing", "the export is missing from storage") from None
+    return Response(body, media_type="application/json", headers=headers)
+
+
+@router.get(
+    "/grasp-sets", response_model=GraspSetPage, summary="List grasp sets, newest first", responses=problems(422)
+)
+def list_grasp_sets(
+    principal: ReadDep,
+    session: SessionDep,
+    settings: SettingsDep,
+    object: Annotated[str | None, Query(pattern=SLUG)] = None,
+    gripper: Annotated[str | None, Query(pattern=SLUG)] = None,
+    cursor: str | None = None,
+    limit: Annotated[int | None, Query(ge=1)] = None,
+) -> dict:
+    return crud.list_grasp_sets(
+        session,
+        object=object,
+        gripper=gripper,
+        cursor=cursor,
+        limit=min(limit or settings.page_size_default, settings.page_size_max),
+    )
+
+
+@router.get(
+    "/grasp-sets/{grasp_set_id}",
+    summary="One grasp-set version: the export JSON (immutable, strong ETag)",
+    response_class=Response,
+    responses={**_EXPORT_RESPONSE, **problems(304, 404, 422)},
+)
+def get_grasp_set(
+    request: Request, grasp_set_id: GraspSetId, principal: ReadDep, session: SessionDep, storage: StorageDep
+) -> Response:
+    return export_response(request, storage, crud.get_grasp_set(session, grasp_set_id), cache_control=IMMUTABLE)
+
+
+@router.get(
+    "/grasp-sets/{grasp_set_id}/candidates",
+    summary="The candidate NPZ (CONTRACT.md) of a grasp set",
+    response_class=Response,
+    responses={200: {"content": {"application/octet-stream": {}}}, **problems(304, 404, 422)},
+)
+def get_candidates(
+    request: Request, grasp_set_id: GraspSetId, principal: ReadDep, session: SessionDep, storage: StorageDep
+) -> Response:
+    gs = crud.get_grasp_set(session, grasp_set_id)
+    return blob_response(
+        request,
+        storage,
+        gs.candidates_key,
+        media_type="application/octet-stream",
+        filename=f"grasp-set-{gs.id}-candidates.npz",
+        cache_control=IMMUTABLE,
+    )
+
+
+@router.get(
+    "/grasp-sets/{grasp_set_id}/recording",
+    summary="The Rerun recording (.rrd) of the job that computed the grasp set",
+    response_class=Response,
+    responses={200: {"content": {"application/octet-stream": {}}}, **problems(304, 404, 422)},
+)
+def get_recording(
+    request: Request, grasp_set_id: GraspSetId, principal: ReadDep, session: SessionDep, storage: StorageDep
+) -> Response:
+    gs = crud.get_grasp_set(session, grasp_set_id)
+    return blob_response(
+        request,
+        storage,
+        gs.recording_key,
+        media_type="application/octet-stream",
+        filename=f"grasp-set-{gs.id}.rrd",
+        cache_control=IMMUTABLE,
+    )
+
+
+@router.get(
+    "/grasp-sets/{grasp_set_id}/grasps",
+    response_model=GraspPage,
+    summary="The grasps of a set from the database, filterable (no file is read)",
+    responses=problems(404, 422),
+)
+def list_grasps(
+    grasp_set_id: GraspSetId,
+    principal: ReadDep,
+    session: SessionDep,
+    settings: SettingsDep,
+    min_width: Annotated[float | None, Query(ge=0, description="metres")] = None,
+    max_width: Annotated[float | None, Query(ge=0, description="metres")] = None,
+    min_friction_margin_deg: float | None = None,
+    cursor: str | None = None,
+    limit: Annotated[int | None, Query(ge=1)] = None,
+) -> dict:
+    return crud.list_grasps(
+        session,
+        grasp_set_id,
+        min_width=min_width,
+        max_width=max_width,
+        min_friction_margin_deg=min_friction_margin_deg,
+        cursor=cursor,
+        limit=min(limit or settings.page_size_default, settings.page_size_max),
+    )
+
+
+@router.get(
+    "/catalogue",
+    response_model=GraspSetPage,
+    tags=["catalogue"],
+    summary="Fleet sync: the newest grasp set of every object for a gripper",
+    description="Summaries with links, ordered by object name, paginated by cursor. `updated_since` keeps only "
+    "objects whose newest grasp set was created after that instant. Send the page's ETag back in If-None-Match "
+    "to get a 304 when nothing changed.",
+    responses=problems(304, 404, 422),
+)
+def list_catalogue(
+    request: Request,
+    response: Response,
+    principal: ReadDep,
+    session: SessionDep,
+    settings: SettingsDep,
+    gripper: Annotated[str, Query(pattern=SLUG, examples=["pgn-80"])],
+    updated_since: Annotated[datetime | None, Query(description="ISO 8601; naive times are UTC")] = None,
+    cursor: str | None = None,
+    limit: Annotated[int | None, Query(ge=1)] = None,
+) -> Any:
+    if updated_since is not None and updated_since.tzinfo is None:
+        from datetime import UTC
+
+        updated_since = updated_since.replace(tzinfo=UTC)
+    body, etag = crud.list_catalogue(
+        session,
+        gripper=gripper,
+        updated_since=updated_since,
+        cursor=cursor,
+        limit=min(limit or settings.page_size_default, settings.page_size_max),
+    )
+    if etag_matches(request, etag):
+        return not_modified(etag, REVALIDATE)
+    response.headers["ETag"] = etag
+    response.headers["Cache-Control"] = REVALIDATE
+    return body
+
+
+@router.get(
+    "/catalogue/{object}/{gripper}",
+    tags=["catalogue"],
+    summary="The newest (or the given version's) grasp set of an object for a gripper, as exported",
+    response_class=Response,
+    responses={**_EXPORT_RESPONSE, **problems(304, 404, 422)},
+)
+def get_catalogue_entry(
+    request: Request,
+    object: Annotated[str, Path(pattern=SLUG)],
+    gripper: Annotated[str, Path(pattern=SLUG)],
+    principal: ReadDep,
+    session: SessionDep,
+    storage: StorageDep,
+    version: Annotated[int | None, Query(ge=1)] = None,
+) -> Response:
+    gs = crud.catalogue_entry(session, object, gripper, version)
+    # a numbered version never changes; "the newest" does, so clients revalidate it with the ETag
+    return export_response(request, storage, gs, cache_control=IMMUTABLE if version else REVALIDATE)

@@ -1,0 +1,151 @@
+"""`graspgen serve | worker | migrate` (graspgen/cli.py delegates here). Exit status: 0 ok, 2 bad input or settings,
+1 internal error.
+
+With nothing configured, `serve` is the embedded default: a SQLite file and artifacts under GRASPGEN_STORAGE_DIR
+(./var/graspgen), the schema migrated on start, jobs run in-process by the same Celery task, and an admin token created
+on first start (printed once).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+__all__ = ["main", "build_parser", "COMMANDS"]
+
+COMMANDS = ("serve", "worker", "migrate")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="graspgen", description="graspgen service commands")
+    sub = p.add_subparsers(dest="command", required=True)
+    s = sub.add_parser("serve", help="run the HTTP API (embedded database and worker unless configured)")
+    s.add_argument("--host", default=None, help="bind address (default GRASPGEN_HOST or 127.0.0.1)")
+    s.add_argument("--port", type=int, default=None, help="port (default GRASPGEN_PORT or 8000)")
+    w = sub.add_parser("worker", help="run a Celery worker for the configured broker")
+    w.add_argument(
+        "--concurrency", type=int, default=None, help="worker processes (default GRASPGEN_WORKER_CONCURRENCY)"
+    )
+    w.add_argument("--hostname", default=None, help="Celery node name, e.g. worker1@%%h")
+    m = sub.add_parser("migrate", help="upgrade the database schema (to head unless given)")
+    m.add_argument("--revision", default="head")
+    return p
+
+
+def _settings():  # type: ignore[no-untyped-def]
+    from pydantic import ValidationError
+
+    from services.common.settings import get_settings
+
+    try:
+        return get_settings()
+    except ValidationError as exc:
+        errors = "; ".join(f"GRASPGEN_{'_'.join(map(str, e['loc'])).upper()}: {e['msg']}" for e in exc.errors())
+        print(f"graspgen: invalid settings: {errors}", file=sys.stderr)
+        return None
+
+
+def _logging(level: str) -> None:
+    logging.basicConfig(level=level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+
+
+def _serve(args: argparse.Namespace) -> int:
+    settings = _settings()
+    if settings is None:
+        return 2
+    _logging(settings.log_level)
+    from services.common.migrate import upgrade
+    from services.common.tokens import TokensFileError, bootstrap_tokens_file
+
+    if settings.embedded_database:
+        upgrade(settings)  # the SQLite file is ours: bring it to the current schema
+    if settings.tokens_file is None:
+        token = bootstrap_tokens_file(settings.tokens_path)
+        if token is not None:
+            print(
+                f"graspgen: created admin token (shown once, hash stored in {settings.tokens_path}):\n{token}",
+                flush=True,
+            )
+    elif not settings.tokens_file.is_file():
+        print(f"graspgen: tokens file {settings.tokens_file} does not exist", file=sys.stderr)
+        return 2
+    import uvicorn
+
+    from services.api.app import create_app
+
+    try:
+        app = create_app(settings)
+    except TokensFileError as exc:
+        print(f"graspgen: {exc}", file=sys.stderr)
+        return 2
+    uvicorn.run(
+        app,
+        host=args.host or settings.host,
+        port=args.port or settings.port,
+        log_level=settings.log_level,
+        log_config=None,
+        server_header=False,
+    )
+    return 0
+
+
+def _worker(args: argparse.Namespace) -> int:
+    settings = _settings()
+    if settings is None:
+        return 2
+    if settings.broker_url is None:
+        print(
+            "graspgen: `graspgen worker` needs GRASPGEN_BROKER_URL (without one, `graspgen serve` runs jobs "
+            "in-process)",
+            file=sys.stderr,
+        )
+        return 2
+    _logging(settings.log_level)
+    from services.worker.celery_app import celery_app
+
+    argv = [
+        "worker",
+        f"--loglevel={settings.log_level.upper()}",
+        f"--concurrency={args.concurrency or settings.worker_concurrency}",
+        f"--queues={settings.queue}",
+        "--without-gossip",
+        "--without-mingle",
+    ]
+    if args.hostname:
+        argv.append(f"--hostname={args.hostname}")
+    celery_app.worker_main(argv)
+    return 0
+
+
+def _migrate(args: argparse.Namespace) -> int:
+    settings = _settings()
+    if settings is None:
+        return 2
+    _logging(settings.log_level)
+    from services.common.db import redacted_url
+    from services.common.migrate import upgrade
+
+    upgrade(settings, args.revision)
+    print(f"graspgen: {redacted_url(settings.sqlalchemy_url)} is at {args.revision}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse exits 2 on bad usage, 0 on --help
+        return int(exc.code or 0)
+    try:
+        return {"serve": _serve, "worker": _worker, "migrate": _migrate}[args.command](args)
+    except KeyboardInterrupt:
+        return 0
+    except Exception as exc:
+        logging.getLogger("graspgen").exception("graspgen %s failed", args.command)
+        print(f"graspgen: {args.command} failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
