@@ -91,3 +91,147 @@ def storage_dir(tmp_path: Path) -> Path:
     d = tmp_path / "var"
     d.mkdir()
     return d
+
+
+# -- test data --------------------------------------------------------------------------------------------------------
+GRIPPER = {
+    "name": "pgn-80",
+    "stroke": 0.08,
+    "finger_width": 0.02,
+    "finger_depth": 0.03,
+    "finger_thickness": 0.01,
+    "palm_depth": 0.02,
+    "friction": 0.5,
+    "pregrasp_clearance": 0.02,
+}
+
+
+def box_stl(extents_mm: tuple[float, float, float] = (40.0, 30.0, 20.0)) -> bytes:
+    """A closed box, in millimetres, as binary STL."""
+    import trimesh
+
+    return trimesh.creation.box(extents=extents_mm).export(file_type="stl")
+
+
+def cylinder_stl(radius_mm: float = 12.0, height_mm: float = 30.0) -> bytes:
+    import trimesh
+
+    return trimesh.creation.cylinder(radius=radius_mm, height=height_mm, sections=24).export(file_type="stl")
+
+
+def slug(prefix: str) -> str:
+    return f"{prefix}-{uuid.uuid4().hex[:10]}"
+
+
+# -- a configured service ---------------------------------------------------------------------------------------------
+TOKENS = {"reader": ["read"], "writer": ["write"], "writer2": ["write"], "admin": ["admin"]}
+
+
+def write_tokens_file(path: Path) -> dict[str, str]:
+    """A tokens file (hashes only) with one token per entry of TOKENS; returns name -> token."""
+    import json
+    import secrets
+
+    from services.common.tokens import hash_token
+
+    tokens = {name: "ggt_test_" + secrets.token_urlsafe(16) for name in TOKENS}
+    doc = {"tokens": [{"name": n, "sha256": hash_token(t), "scopes": TOKENS[n]} for n, t in tokens.items()]}
+    path.write_text(json.dumps(doc))
+    return tokens
+
+
+class Service:
+    """A running app (TestClient) plus what tests need to talk about it."""
+
+    def __init__(self, client, settings, tokens: dict[str, str]) -> None:  # type: ignore[no-untyped-def]
+        self.client = client
+        self.settings = settings
+        self.tokens = tokens
+        self.app = client.app
+
+    def h(self, who: str = "writer", **extra: str) -> dict[str, str]:
+        return {"Authorization": f"Bearer {self.tokens[who]}", **extra}
+
+    def get(self, url: str, who: str = "reader", **kw):  # type: ignore[no-untyped-def]
+        return self.client.get(url, headers={**self.h(who), **kw.pop("headers", {})}, **kw)
+
+    def post(self, url: str, who: str = "writer", **kw):  # type: ignore[no-untyped-def]
+        return self.client.post(url, headers={**self.h(who), **kw.pop("headers", {})}, **kw)
+
+    def row_counts(self) -> dict[str, int]:
+        from sqlalchemy import func, select
+
+        from services.common.models import Base
+
+        with self.app.state.db.session() as s:
+            return {
+                name: s.execute(select(func.count()).select_from(t)).scalar_one()
+                for name, t in Base.metadata.tables.items()
+            }
+
+    def upload(
+        self, name: str, data: bytes | None = None, units: str = "mm", filename: str = "part.stl", who: str = "writer"
+    ):  # type: ignore[no-untyped-def]
+        return self.post(
+            "/v1/objects",
+            who=who,
+            files={"file": (filename, data or box_stl(), "model/stl")},
+            data={"name": name, "units": units},
+        )
+
+    def gripper(self, name: str, **changes: float):  # type: ignore[no-untyped-def]
+        return self.post("/v1/grippers", json={**GRIPPER, "name": name, **changes})
+
+    def wait_job(self, job_id: str, timeout: float = 120.0) -> dict:
+        import time
+
+        end = time.monotonic() + timeout
+        while True:
+            body = self.get(f"/v1/jobs/{job_id}").json()
+            if body["state"] in ("succeeded", "failed", "cancelled"):
+                return body
+            if time.monotonic() > end:
+                raise AssertionError(f"job {job_id} still {body['state']} after {timeout} s: {body}")
+            time.sleep(0.1)
+
+
+def redis_cleanup(prefix: str) -> None:
+    import redis
+
+    r = redis.Redis.from_url(f"{REDIS_URL}/{redis_db()}")
+    try:
+        keys = list(r.scan_iter(match=f"{prefix}*", count=1000))
+        if keys:
+            r.delete(*keys)
+    finally:
+        r.close()
+
+
+def broker_settings() -> dict[str, str]:
+    """A Redis database number of this xdist worker, and a key prefix and queue of this run."""
+    prefix = unique_name("ggq") + ":"
+    return {"broker_url": f"{REDIS_URL}/{redis_db()}", "broker_key_prefix": prefix, "queue": prefix.rstrip(":")}
+
+
+@pytest.fixture(scope="session")
+def pg_service(pg_schema, tmp_path_factory) -> Iterator[Service]:
+    """The API on the shared PostgreSQL schema, sending jobs to Redis (no worker consumes them here)."""
+    from fastapi.testclient import TestClient
+
+    from services.api.app import create_app
+    from services.common.settings import Settings
+
+    root = tmp_path_factory.mktemp("pg-service")
+    tokens = write_tokens_file(root / "tokens.json")
+    broker = broker_settings()
+    settings = Settings(
+        database_url=PG_URL,
+        database_schema=pg_schema,
+        storage_dir=root / "var",
+        tokens_file=root / "tokens.json",
+        max_upload_bytes=256 * 1024,
+        **broker,
+    )
+    with TestClient(create_app(settings)) as client:
+        yield Service(client, settings, tokens)
+    redis_cleanup(broker["broker_key_prefix"])
