@@ -21,7 +21,7 @@ from urllib.parse import urlsplit
 
 from .settings import Settings
 
-__all__ = ["Storage", "LocalStorage", "S3Storage", "StoredBlob", "make_storage", "sha256_file", "blob_key"]
+__all__ = ["Storage", "LocalStorage", "S3Storage", "StoredBlob", "make_storage", "sha256_file", "blob_key", "check_key"]
 
 _CHUNK = 1024 * 1024
 
@@ -37,6 +37,13 @@ def blob_key(sha256: str) -> str:
     if len(sha256) != 64 or any(c not in "0123456789abcdef" for c in sha256):
         raise ValueError("not a sha256 hex digest")
     return f"sha256/{sha256[:2]}/{sha256}"
+
+
+def check_key(key: str) -> str:
+    """Accept only keys that blob_key() produces, so no path or object name is ever built from anything else."""
+    if not isinstance(key, str) or blob_key(key.rsplit("/", 1)[-1]) != key:
+        raise ValueError("invalid storage key")
+    return key
 
 
 def sha256_file(path: str | Path) -> tuple[str, int]:
@@ -111,11 +118,8 @@ class LocalStorage(Storage):
         self.root.mkdir(parents=True, exist_ok=True)
 
     def _path(self, key: str) -> Path:
-        # keys come from blob_key() only; refuse anything else rather than build a path from it
-        parts = key.split("/")
-        if len(parts) != 3 or parts[0] != "sha256" or blob_key(parts[2]) != key:
-            raise ValueError("invalid storage key")
-        return self.root / parts[1] / parts[2]
+        _, shard, digest = check_key(key).split("/")
+        return self.root / shard / digest
 
     def exists(self, key: str) -> bool:
         return self._path(key).is_file()
@@ -164,7 +168,7 @@ class S3Storage(Storage):
         )
 
     def _name(self, key: str) -> str:
-        blob_key(key.rsplit("/", 1)[-1])  # validates
+        check_key(key)
         return f"{self.prefix}/{key}" if self.prefix else key
 
     def exists(self, key: str) -> bool:
@@ -190,7 +194,14 @@ class S3Storage(Storage):
         return obj["Body"]  # a StreamingBody: read(n), close(), context manager
 
     def size(self, key: str) -> int:
-        return int(self.client.head_object(Bucket=self.bucket, Key=self._name(key))["ContentLength"])
+        from botocore.exceptions import ClientError
+
+        try:
+            return int(self.client.head_object(Bucket=self.bucket, Key=self._name(key))["ContentLength"])
+        except ClientError as exc:
+            if exc.response.get("Error", {}).get("Code") in ("404", "NoSuchKey", "NotFound"):
+                raise FileNotFoundError(key) from None
+            raise
 
     def ping(self) -> None:
         self.client.head_bucket(Bucket=self.bucket)
