@@ -43,7 +43,7 @@ class Params:
 
     def __post_init__(self) -> None:
         _int(self, "points", 100, 1_000_000)
-        _int(self, "rolls", 1, 360)
+        _int(self, "rolls", 1, 64)  # one 64-bit roll mask per candidate
         _int(self, "k1", 1, 10_000)
         _int(self, "k2", 1, 1_000)
         _int(self, "seed", 0, 2**32 - 1)

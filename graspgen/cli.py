@@ -1,0 +1,262 @@
+"""`graspgen` command line: generate, demo; serve / worker / migrate start the service (services.cli).
+
+Exit status: 0 success, 2 bad input (one-line reason on stderr, no output written), 1 internal error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+import traceback
+import uuid
+from pathlib import Path
+from typing import Any
+
+from .errors import Cancelled, GraspgenError, InvalidUnitsError
+
+__all__ = ["main", "DEMO_GRIPPER"]
+
+#: the gripper of the demo: the contract's example (a PGN-80-like parallel gripper)
+DEMO_GRIPPER: dict[str, Any] = {
+    "name": "pgn-80",
+    "stroke": 0.08,
+    "min_width": 0.0,
+    "finger_width": 0.02,
+    "finger_depth": 0.03,
+    "finger_thickness": 0.01,
+    "palm_depth": 0.02,
+    "palm_width": 0.02,
+    "friction": 0.5,
+    "pregrasp_clearance": 0.02,
+}
+
+
+class _UsageError(Exception):
+    pass
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # argparse exits 2 as well; keep the message to one line
+        raise _UsageError(message)
+
+
+def _add_run_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--points", type=int, default=10_000, help="target number of surface points (default 10000)")
+    p.add_argument("--friction", type=float, default=None, help="friction coefficient (default: the gripper's)")
+    p.add_argument("--safety-factor", type=float, default=1.5, help="friction cone divisor (default 1.5)")
+    p.add_argument("--rolls", type=int, default=16, help="roll angles about the closing axis (default 16)")
+    p.add_argument("--k1", type=int, default=16, help="translation clusters (default 16)")
+    p.add_argument("--k2", type=int, default=4, help="direction clusters per translation cluster (default 4)")
+    p.add_argument("--inside", action="store_true", help="also inside grasps (fingers opening outwards)")
+    p.add_argument("--collision", choices=("swept", "paper"), default="swept", help="collision model")
+    p.add_argument("--seed", type=int, default=0)
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="graspgen", description="Grasp poses for parallel-jaw grippers (CONTRACT.md).")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    g = sub.add_parser("generate", help="grasps for one part and gripper")
+    g.add_argument("mesh", help="STL/OBJ/PLY/OFF/GLB mesh, or PLY/NPZ point cloud")
+    g.add_argument("--units", choices=("mm", "cm", "m", "in"), help="the length unit of the file (required)")
+    g.add_argument("--gripper", required=True, help="gripper spec JSON (metres)")
+    g.add_argument("--name", help="object name in the export (default: the file stem)")
+    _add_run_options(g)
+    g.add_argument("--out", required=True, help="grasp_set/1 JSON to write")
+    g.add_argument("--candidates", help="candidate NPZ to write")
+    g.add_argument("--recording", help="Rerun .rrd to write")
+    g.add_argument("--quiet", action="store_true", help="no summary table")
+    d = sub.add_parser("demo", help="grasps for a shipped example part, written to out/demo/")
+    d.add_argument("--part", default="ring_screw", help="example part (default ring_screw)")
+    _add_run_options(d)
+    d.add_argument("--out-dir", default="out/demo")
+    for name in ("serve", "worker", "migrate"):
+        sub.add_parser(name, help=f"service: {name} (see docs/SERVICE.md)", add_help=False)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    os.environ.setdefault("RERUN_ANALYTICS", "off")  # never phone home from a plant network
+    if argv and argv[0] in ("serve", "worker", "migrate"):
+        from services.cli import main as service_main
+
+        return service_main(argv)
+    try:
+        args = _parser().parse_args(argv)
+    except _UsageError as exc:
+        print(f"graspgen: error: {exc}", file=sys.stderr)
+        return 2
+    try:
+        if args.command == "generate":
+            return _generate(args)
+        return _demo(args)
+    except GraspgenError as exc:
+        print(f"graspgen: error: {exc.message}", file=sys.stderr)
+        return 2
+    except Cancelled:
+        print("graspgen: cancelled", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("graspgen: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # an internal error: say so plainly, with the traceback for a bug report
+        traceback.print_exc()
+        print(f"graspgen: internal error: {exc}", file=sys.stderr)
+        return 1
+
+
+def _run_kwargs(args: argparse.Namespace) -> dict[str, Any]:
+    return dict(
+        points=args.points,
+        friction=args.friction,
+        safety_factor=args.safety_factor,
+        rolls=args.rolls,
+        k1=args.k1,
+        k2=args.k2,
+        inside=args.inside,
+        collision=args.collision,
+        seed=args.seed,
+    )
+
+
+def _generate(args: argparse.Namespace) -> int:
+    from . import pipeline
+    from .gripper import GripperSpec
+    from .params import Params
+    from .units import extents_under_each_unit
+
+    spec = GripperSpec.load(args.gripper)
+    Params(**_run_kwargs(args))  # validate before any heavy work
+    if args.units is None:
+        from .parts import read_raw_extents
+
+        raw = read_raw_extents(args.mesh)
+        raise InvalidUnitsError(
+            "--units is required (mm, cm, m or in); this part's extents would be " + extents_under_each_unit(raw)
+        )
+    outputs = {
+        "out": Path(args.out),
+        "candidates": args.candidates and Path(args.candidates),
+        "recording": args.recording and Path(args.recording),
+    }
+    return _run_and_write(
+        lambda rec, progress: pipeline.generate(
+            args.mesh,
+            spec,
+            units=args.units,
+            recording=rec,
+            progress=progress,
+            object_name=args.name,
+            **_run_kwargs(args),
+        ),
+        outputs,
+        quiet=args.quiet,
+    )
+
+
+def _demo(args: argparse.Namespace) -> int:
+    from . import pipeline
+    from .examples import EXAMPLES, example_part
+
+    if args.part not in EXAMPLES:
+        raise GraspgenError(f"unknown example part {args.part!r}: choose one of {', '.join(EXAMPLES)}")
+    out = Path(args.out_dir)
+    outputs = {"out": out / "grasps.json", "candidates": out / "candidates.npz", "recording": out / "run.rrd"}
+    part = example_part(args.part)
+    print(
+        f"graspgen demo: part {args.part!r} ({' x '.join(f'{e * 1e3:.0f}' for e in part.extents)} mm), "
+        f"gripper {DEMO_GRIPPER['name']!r}, {args.points} points",
+        file=sys.stderr,
+    )
+    code = _run_and_write(
+        lambda rec, progress: pipeline.generate(
+            part, DEMO_GRIPPER, recording=rec, progress=progress, **_run_kwargs(args)
+        ),
+        outputs,
+        quiet=False,
+    )
+    if code == 0:
+        print(
+            f"wrote {outputs['out']}, {outputs['candidates']} and {outputs['recording']} "
+            f"(open the recording with: rerun {outputs['recording']})"
+        )
+    return code
+
+
+def _run_and_write(run, outputs: dict[str, Path | None], *, quiet: bool) -> int:
+    """Run, then move every output into place only when all of them were written: nothing half-done."""
+    tag = uuid.uuid4().hex[:8]
+    temps: dict[str, Path] = {}
+    for key, path in outputs.items():
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            temps[key] = path.with_name(f".{path.name}.{tag}.tmp")
+    bar = _ProgressBar(enabled=sys.stderr.isatty() and not quiet)
+    try:
+        result = run(temps.get("recording"), bar)
+        bar.close()
+        result.save(temps["out"])
+        if "candidates" in temps:
+            result.save_candidates(temps["candidates"])
+        for key, tmp in temps.items():
+            os.replace(tmp, outputs[key])
+    finally:
+        bar.close()
+        for tmp in temps.values():
+            tmp.unlink(missing_ok=True)
+    if not quiet:
+        print(_summary(result))
+    if not result.grasps:
+        reason = result.stats.get("empty_reason", {})
+        print(f"graspgen: no grasps: {reason.get('message', 'no candidate survived')}", file=sys.stderr)
+    return 0
+
+
+class _ProgressBar:
+    """One line on stderr, only on a terminal."""
+
+    def __init__(self, *, enabled: bool) -> None:
+        self.enabled = enabled
+        self.t0 = time.perf_counter()
+        self.open = False
+
+    def __call__(self, stage: str, fraction: float) -> None:
+        if not self.enabled:
+            return
+        width = 24
+        done = int(round(fraction * width))
+        sys.stderr.write(f"\r{stage:<10} [{'#' * done}{'.' * (width - done)}] {time.perf_counter() - self.t0:6.1f} s")
+        sys.stderr.flush()
+        self.open = True
+
+    def close(self) -> None:
+        if self.open:
+            sys.stderr.write("\n")
+            self.open = False
+
+
+def _summary(result) -> str:
+    s = result.stats
+    rej = s["rejected"]
+    t = s["timings_s"]
+    rows = [
+        ("object", f"{result.object['name']} ({result.object['source_units']})"),
+        ("gripper", result.gripper.name),
+        ("points", f"{s['points']} (mean spacing {s.get('spacing_mean', 0) * 1e3:.2f} mm)"),
+        ("pairs", f"{s['pairs_total']:,}"),
+        ("rejected: stroke", f"{rej['stroke']:,}"),
+        ("rejected: outside", f"{rej['outside']:,}"),
+        ("rejected: friction", f"{rej['friction']:,}"),
+        ("rejected: collision", f"{rej['collision']:,}"),
+        ("candidates", f"{s['candidates']:,}"),
+        ("grasps", f"{len(result.grasps)}"),
+        ("time", " ".join(f"{k} {v:.2f}s" for k, v in t.items())),
+    ]
+    w = max(len(k) for k, _ in rows)
+    return "\n".join(f"{k:<{w}}  {v}" for k, v in rows)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

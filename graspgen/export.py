@@ -1,0 +1,149 @@
+"""GraspSet: the result of a run, its grasp_set/1 JSON export and the candidate NPZ (CONTRACT.md)."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import InvalidCandidatesError
+from .gripper import GripperSpec
+from .params import Params
+
+__all__ = ["FORMAT", "Candidates", "GraspSet", "load_candidates", "write_atomic"]
+
+FORMAT = "graspgen.grasp_set/1"
+
+
+@dataclass(frozen=True)
+class Candidates:
+    """The pairs that passed (a)-(c) and have at least one collision-free roll (arrays over n candidates)."""
+
+    contacts: np.ndarray  # (n, 2, 3) float64, metres, object frame
+    normals: np.ndarray  # (n, 2, 3) float64, outward unit normals
+    free_rolls: np.ndarray  # (n, R) bool
+    roll_angles_rad: np.ndarray  # (R,)
+    friction_margin_deg: np.ndarray  # (n,)
+    inside: np.ndarray  # (n,) bool
+    labels: np.ndarray  # (n, 2) int32 (translation cluster, direction cluster); -1 before clustering
+    medoids: np.ndarray  # (m,) int64, export order
+
+    @property
+    def midpoints(self) -> np.ndarray:
+        return 0.5 * (self.contacts[:, 0] + self.contacts[:, 1])
+
+    @property
+    def widths(self) -> np.ndarray:
+        return np.linalg.norm(self.contacts[:, 1] - self.contacts[:, 0], axis=1)
+
+    @property
+    def axes(self) -> np.ndarray:
+        d = self.contacts[:, 1] - self.contacts[:, 0]
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    def __len__(self) -> int:
+        return len(self.contacts)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {
+            "contacts": self.contacts,
+            "normals": self.normals,
+            "midpoints": self.midpoints,
+            "axes": self.axes,
+            "free_rolls": self.free_rolls,
+            "roll_angles_rad": self.roll_angles_rad,
+            "friction_margin_deg": self.friction_margin_deg,
+            "labels": self.labels.astype(np.int32),
+            "medoids": self.medoids.astype(np.int64),
+            "inside": self.inside,
+        }
+
+
+def load_candidates(path: str | os.PathLike) -> Candidates:
+    """Read a candidate NPZ back, checking shapes so that a damaged file fails with a clear reason."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            data = {k: z[k] for k in z.files}
+    except (OSError, ValueError) as exc:
+        raise InvalidCandidatesError(f"cannot read candidates {path}: {exc}") from None
+    required = ("contacts", "normals", "free_rolls", "roll_angles_rad", "friction_margin_deg")
+    missing = [k for k in required if k not in data]
+    if missing:
+        raise InvalidCandidatesError(f"candidates {path} lack " + ", ".join(missing))
+    n = len(data["contacts"])
+    R = len(data["roll_angles_rad"])
+    if data["contacts"].shape != (n, 2, 3) or data["normals"].shape != (n, 2, 3):
+        raise InvalidCandidatesError("contacts and normals must be (n, 2, 3)")
+    if data["free_rolls"].shape != (n, R) or data["friction_margin_deg"].shape != (n,):
+        raise InvalidCandidatesError("free_rolls must be (n, R) and friction_margin_deg (n,)")
+    if not np.all(np.isfinite(data["contacts"])):
+        raise InvalidCandidatesError("contacts hold non-finite values")
+    return Candidates(
+        contacts=data["contacts"].astype(np.float64),
+        normals=data["normals"].astype(np.float64),
+        free_rolls=data["free_rolls"].astype(bool),
+        roll_angles_rad=data["roll_angles_rad"].astype(np.float64),
+        friction_margin_deg=data["friction_margin_deg"].astype(np.float64),
+        inside=data.get("inside", np.zeros(n, dtype=bool)).astype(bool),
+        labels=data.get("labels", np.full((n, 2), -1, dtype=np.int32)).astype(np.int32),
+        medoids=data.get("medoids", np.zeros(0, dtype=np.int64)).astype(np.int64),
+    )
+
+
+def write_atomic(path: str | os.PathLike, data: bytes) -> None:
+    """Write to a temporary file beside `path` and rename it, so no reader ever sees half a file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file the usual permissions
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+@dataclass
+class GraspSet:
+    object: dict[str, Any]
+    gripper: GripperSpec
+    params: Params
+    friction: float
+    stats: dict[str, Any]
+    grasps: list[dict[str, Any]]
+    candidates: Candidates
+    warnings: list[str] = field(default_factory=list)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "format": FORMAT,
+            "units": "m",
+            "object": dict(self.object),
+            "gripper": self.gripper.to_dict(),
+            "params": self.params.to_dict(friction=self.friction),
+            "stats": self.stats,
+            "grasps": self.grasps,
+        }
+
+    def to_json_bytes(self) -> bytes:
+        """Canonical bytes: the same inputs, parameters and seed give the same bytes (but for timings)."""
+        return (json.dumps(self.to_json(), indent=1, allow_nan=False) + "\n").encode("utf-8")
+
+    def save(self, path: str | os.PathLike) -> None:
+        write_atomic(path, self.to_json_bytes())
+
+    def save_candidates(self, path: str | os.PathLike) -> None:
+        import io
+
+        buf = io.BytesIO()
+        np.savez_compressed(buf, **self.candidates.arrays())
+        write_atomic(path, buf.getvalue())

@@ -1,0 +1,121 @@
+"""Rerun recording (.rrd) of one run: the sample, the candidates by cluster, the chosen grippers, the stats."""
+
+from __future__ import annotations
+
+import json
+import os
+import uuid
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .transforms import matrix_to_quaternion_xyzw
+
+if TYPE_CHECKING:  # pragma: no cover
+    import rerun as rr
+
+    from .export import GraspSet
+
+__all__ = ["record_run", "MAX_LOGGED_CANDIDATES", "cluster_colours"]
+
+#: candidate midpoints beyond this many are thinned (evenly by index) to keep recordings small
+MAX_LOGGED_CANDIDATES = 200_000
+
+
+def cluster_colours(labels: np.ndarray) -> np.ndarray:
+    """A fixed, well-separated RGB colour (uint8, (n, 3)) per cluster label (golden-angle hues)."""
+    import colorsys
+
+    labels = np.asarray(labels, dtype=np.int64)
+    hues = (labels * 0.618033988749895) % 1.0
+    rgb = np.array([colorsys.hsv_to_rgb(h, 0.75, 0.95) for h in hues]) if len(labels) else np.zeros((0, 3))
+    return (rgb * 255).astype(np.uint8)
+
+
+def record_run(
+    target: str | os.PathLike | rr.RecordingStream,
+    result: GraspSet,
+    *,
+    sample_points: np.ndarray | None,
+    sample_normals: np.ndarray | None,
+    extra: dict[str, Any] | None = None,
+) -> None:
+    """Log one run into `target`: a RecordingStream of the caller's, or a path for a new .rrd (written whole)."""
+    import rerun as rr
+
+    if isinstance(target, rr.RecordingStream):
+        _log(target, result, sample_points, sample_normals, extra)
+        return
+    path = Path(target)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
+    rid = uuid.uuid5(
+        uuid.NAMESPACE_URL, f"graspgen:{result.object.get('sha256')}:{json.dumps(result.params.to_dict())}"
+    )
+    stream = rr.RecordingStream("graspgen", recording_id=rid)
+    try:
+        stream.save(tmp)
+        _log(stream, result, sample_points, sample_normals, extra)
+        stream.flush()
+        stream.disconnect()
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def _log(stream, result, points, normals, extra) -> None:
+    import rerun as rr
+
+    stream.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    if points is not None and len(points):
+        stream.log("part/points", rr.Points3D(points, radii=0.0004, colors=[170, 170, 170]), static=True)
+        if normals is not None:
+            stream.log(
+                "part/normals", rr.Arrows3D(origins=points, vectors=normals * 0.003, colors=[90, 140, 220]), static=True
+            )
+    cands = result.candidates
+    if len(cands):
+        idx = np.arange(len(cands))
+        if len(idx) > MAX_LOGGED_CANDIDATES:
+            idx = np.linspace(0, len(cands) - 1, MAX_LOGGED_CANDIDATES).astype(np.int64)
+        labels = cands.labels[idx, 0]
+        stream.log(
+            "candidates/midpoints",
+            rr.Points3D(cands.midpoints[idx], radii=0.0003, colors=cluster_colours(labels), class_ids=labels),
+            static=True,
+        )
+    centers, half, quats, colours, names = [], [], [], [], []
+    for rank, g in enumerate(result.grasps):
+        T = np.asarray(g["pose"])
+        q = matrix_to_quaternion_xyzw(T)
+        colour = cluster_colours(np.array([g["cluster"][0]]))[0]
+        for box in result.gripper.boxes(g["width"]):
+            centers.append(T[:3, :3] @ np.asarray(box.center) + T[:3, 3])
+            half.append(np.asarray(box.extents) / 2)
+            quats.append(rr.Quaternion(xyzw=q))
+            colours.append(colour)
+            names.append(f"#{rank} c{g['cluster'][0]}.{g['cluster'][1]}")
+    if centers:
+        stream.log(
+            "grasps/grippers",
+            rr.Boxes3D(centers=centers, half_sizes=half, quaternions=quats, colors=colours, labels=names),
+            static=True,
+        )
+        axes_o = np.array([g["contacts"][0] for g in result.grasps])
+        axes_v = np.array([np.subtract(g["contacts"][1], g["contacts"][0]) for g in result.grasps])
+        stream.log(
+            "grasps/closing_axes", rr.Arrows3D(origins=axes_o, vectors=axes_v, colors=[230, 60, 60]), static=True
+        )
+    summary = {
+        "object": result.object,
+        "params": result.params.to_dict(friction=result.friction),
+        "stats": result.stats,
+        "grasps": len(result.grasps),
+        **(extra or {}),
+    }
+    stream.log(
+        "stats",
+        rr.TextDocument("```json\n" + json.dumps(summary, indent=1) + "\n```", media_type=rr.MediaType.MARKDOWN),
+        static=True,
+    )
