@@ -54,7 +54,7 @@ def problem(code: str, title: str, detail: str, *, status: int = 422, **extra: A
     }
 
 
-def finish(job: Job, state: str, *, error: dict[str, Any] | None = None) -> None:
+def finish(job: Job, state: str, error: dict[str, Any] | None = None) -> None:
     job.state = state
     job.error = error
     job.finished_at = utcnow()
