@@ -1,0 +1,149 @@
+"""The compiled kernels against the plain-numpy reference (tests/graspgen/reference.py): exact equality."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+from graspgen.antipodal import antipodal_pairs, cone_half_angle_rad, friction_margin_deg, grid_order
+from graspgen.collision import collision_model, free_rolls
+from graspgen.gripper import GripperSpec
+
+from . import reference as ref
+
+GRIPPER = GripperSpec(name="pgn-80", stroke=0.08, finger_width=0.02, finger_depth=0.03, finger_thickness=0.01,
+                      friction=0.5, pregrasp_clearance=0.02, palm_depth=0.02)
+
+
+def _sample(mesh: trimesh.Trimesh, n: int, seed: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    pts, face = trimesh.sample.sample_surface_even(mesh, n, seed=seed)
+    return np.asarray(pts), np.asarray(mesh.face_normals[face])
+
+
+def _parts():
+    ring = trimesh.creation.annulus(r_min=0.01, r_max=0.03, height=0.02, sections=48)
+    box = trimesh.creation.box(extents=[0.05, 0.03, 0.02])
+    cyl = trimesh.creation.cylinder(radius=0.015, height=0.06, sections=48)
+    # a U-shaped part: a slot 6 mm wide between two prongs (narrower than two fingers)
+    u = trimesh.util.concatenate([
+        trimesh.creation.box(extents=[0.04, 0.02, 0.01], transform=trimesh.transformations.translation_matrix([0, 0, -0.015])),
+        trimesh.creation.box(extents=[0.017, 0.02, 0.03], transform=trimesh.transformations.translation_matrix([-0.0115, 0, 0.005])),
+        trimesh.creation.box(extents=[0.017, 0.02, 0.03], transform=trimesh.transformations.translation_matrix([0.0115, 0, 0.005])),
+    ])
+    return {"ring": ring, "box": box, "cylinder": cyl, "u": u}
+
+
+@pytest.mark.parametrize("inside", [False, True])
+@pytest.mark.parametrize("name", ["ring", "box", "u"])
+def test_pairs_equal_reference(name, inside):
+    pts, nrm = _sample(_parts()[name], 1200)
+    res = antipodal_pairs(pts, nrm, stroke=0.05, min_width=0.004, friction=0.5, safety_factor=1.5, inside=inside,
+                          finger_thickness=0.01)
+    I, J, out, inn = ref.pair_criteria(pts, nrm, stroke=0.05, min_width=0.004, friction=0.5, safety_factor=1.5,
+                                       inside=inside, finger_thickness=0.01)
+    acc = out | inn
+    assert np.array_equal(res.i, I[acc]) and np.array_equal(res.j, J[acc])
+    assert np.array_equal(res.inside, inn[acc])
+    assert res.pairs_total == len(I)
+    assert res.rejected_stroke + res.rejected_outside + res.rejected_friction + len(res.i) == res.pairs_total
+    assert len(res.i) > 0
+
+
+def test_pair_counts_by_criterion_on_a_box():
+    pts, nrm = _sample(_parts()["box"], 800)
+    res = antipodal_pairs(pts, nrm, stroke=0.04, min_width=0.0, friction=0.5, safety_factor=1.5, inside=False,
+                          finger_thickness=0.01)
+    d = np.linalg.norm(pts[:, None] - pts[None], axis=2)[np.triu_indices(len(pts), 1)]
+    # the box is 50 mm long: every pair farther apart than the 40 mm stroke is a stroke rejection
+    assert res.rejected_stroke == int(np.sum(d > 0.04))
+
+
+def test_grid_order_gives_the_same_pairs():
+    pts, nrm = _sample(_parts()["ring"], 1500)
+    kw = dict(stroke=0.08, min_width=0.0, friction=0.5, safety_factor=1.5, inside=False, finger_thickness=0.01)
+    a = antipodal_pairs(pts, nrm, **kw)
+    o = grid_order(pts, 0.04)
+    b = antipodal_pairs(pts[o], nrm[o], **kw)
+    pa = {(int(i), int(j)) for i, j in zip(a.i, a.j, strict=True)}
+    pb = {tuple(sorted((int(o[i]), int(o[j])))) for i, j in zip(b.i, b.j, strict=True)}
+    assert pa == pb
+
+
+@pytest.mark.parametrize("delta_deg, accepted", [(-0.1, True), (0.1, False)])
+def test_friction_boundary(delta_deg, accepted):
+    """A pair at the cone limit +- 0.1 degree is accepted / rejected."""
+    limit = math.degrees(cone_half_angle_rad(0.5, 1.5))
+    ang = math.radians(limit + delta_deg)
+    pts = np.array([[0.0, 0.0, 0.0], [0.02, 0.0, 0.0]])
+    # contact 0 normal tilted by `ang` from -x; contact 1 exactly +x
+    nrm = np.array([[-math.cos(ang), math.sin(ang), 0.0], [1.0, 0.0, 0.0]])
+    res = antipodal_pairs(pts, nrm, stroke=0.08, min_width=0.0, friction=0.5, safety_factor=1.5, inside=False,
+                          finger_thickness=0.01)
+    assert (len(res.i) == 1) is accepted
+    assert res.rejected_friction == (0 if accepted else 1)
+    if accepted:
+        m = friction_margin_deg(pts, nrm, res.i, res.j, res.inside, cone_half_angle_rad(0.5, 1.5))
+        assert m[0] == pytest.approx(0.1, abs=1e-9)
+
+
+def _candidates(pts, nrm, inside=False):
+    res = antipodal_pairs(pts, nrm, stroke=0.08, min_width=0.0, friction=0.5, safety_factor=1.5, inside=inside,
+                          finger_thickness=0.01)
+    d = pts[res.j] - pts[res.i]
+    w = np.linalg.norm(d, axis=1)
+    return (pts[res.i] + pts[res.j]) / 2, d / w[:, None], w, res.inside
+
+
+@pytest.mark.parametrize("mode", ["paper", "swept"])
+@pytest.mark.parametrize("name", ["ring", "cylinder", "u"])
+def test_free_rolls_equal_reference(name, mode):
+    pts, nrm = _sample(_parts()[name], 1200)
+    mids, axes, w, inside = _candidates(pts, nrm, inside=(name == "ring"))
+    fr = free_rolls(pts, nrm, mids, axes, w, inside, collision_model(GRIPPER, mode), 16)
+    sel = np.random.default_rng(0).choice(len(mids), min(250, len(mids)), replace=False)
+    # make sure both outcomes are in the checked sample
+    sel = np.unique(np.concatenate([sel, np.nonzero(fr.any(1))[0][:50], np.nonzero(~fr.any(1))[0][:50]]))
+    expect = ref.free_rolls(pts, mids[sel], axes[sel], w[sel], inside[sel], GRIPPER, mode, 16)
+    assert np.array_equal(fr[sel], expect)
+    assert expect.any() and not expect.all()
+
+
+@pytest.mark.parametrize("rolls", [1, 5, 64])
+def test_free_rolls_any_roll_count(rolls):
+    pts, nrm = _sample(_parts()["ring"], 600)
+    mids, axes, w, inside = _candidates(pts, nrm)
+    sel = np.arange(0, len(mids), max(1, len(mids) // 150))
+    fr = free_rolls(pts, nrm, mids[sel], axes[sel], w[sel], inside[sel], collision_model(GRIPPER, "swept"), rolls)
+    assert fr.shape == (len(sel), rolls)
+    assert np.array_equal(fr, ref.free_rolls(pts, mids[sel], axes[sel], w[sel], inside[sel], GRIPPER, "swept", rolls))
+
+
+def test_slot_narrower_than_finger_rejects_grasps_across_it():
+    """The U part's 6 mm slot is narrower than the 10 mm finger: no grasp may put a finger into it."""
+    pts, nrm = _sample(_parts()["u"], 3000)
+    mids, axes, w, inside = _candidates(pts, nrm)
+    fr = free_rolls(pts, nrm, mids, axes, w, inside, collision_model(GRIPPER, "paper"), 16)
+    # the pairs across one prong whose finger would sit in the slot: contacts on the prong's inner wall
+    inner_wall = (np.abs(np.abs(mids[:, 0] - axes[:, 0] * w / 2) - 0.003) < 1e-4) | (
+        np.abs(np.abs(mids[:, 0] + axes[:, 0] * w / 2) - 0.003) < 1e-4)
+    across_x = np.abs(axes[:, 0]) > 0.95
+    sel = inner_wall & across_x
+    assert sel.sum() > 10
+    assert not fr[sel].any()
+
+
+def test_paper_and_swept_differ_where_the_opening_hits_a_wall():
+    """Grasping one prong of the U across its width: the contacts are free in `paper` mode (fingers of 10 mm
+    fit beside the prong's outer face), but the 20 mm pre-grasp opening swings the inner finger into the slot
+    wall region in `swept` mode."""
+    g = GripperSpec(name="g", stroke=0.08, finger_width=0.01, finger_depth=0.01, finger_thickness=0.002,
+                    friction=0.5, pregrasp_clearance=0.03, palm_depth=0.0)
+    pts, nrm = _sample(_parts()["u"], 3000)
+    mids, axes, w, inside = _candidates(pts, nrm)
+    paper = free_rolls(pts, nrm, mids, axes, w, inside, collision_model(g, "paper"), 16).any(1)
+    swept = free_rolls(pts, nrm, mids, axes, w, inside, collision_model(g, "swept"), 16).any(1)
+    assert not np.any(swept & ~paper)  # swept only adds volume
+    assert np.sum(paper & ~swept) > 0
