@@ -149,7 +149,7 @@ def generate(
         "watertight": bool(part.watertight),
     }
     if len(cands) == 0:
-        stats["empty_reason"] = _empty_reason(rejected, pairs.pairs_total, spec, params, mu, part)
+        stats["empty_reason"] = _empty_reason(rejected, pairs.pairs_total, spec, params, mu, pts, nrm)
 
     obj = {
         "name": object_name or part.name,
@@ -281,7 +281,7 @@ def _grasps(cands: Candidates, medoids, clusters, sizes) -> list[dict[str, Any]]
                 "normals": cands.normals[m].tolist(),
                 "friction_margin_deg": float(cands.friction_margin_deg[m]),
                 # rounded to 1e-9 deg so that 247.5 prints as 247.5, not 247.49999999999997
-            "free_rolls_deg": [round(float(v), 9) for v in np.degrees(cands.roll_angles_rad[cands.free_rolls[m]])],
+                "free_rolls_deg": [round(float(v), 9) for v in np.degrees(cands.roll_angles_rad[cands.free_rolls[m]])],
                 "cluster": [int(clusters[r, 0]), int(clusters[r, 1])],
                 "cluster_size": int(sizes[r]),
                 "roll_deg": round(float(np.degrees(psi[r])), 9),
@@ -292,18 +292,40 @@ def _grasps(cands: Candidates, medoids, clusters, sizes) -> list[dict[str, Any]]
     return out
 
 
-def _empty_reason(rejected, total, spec: GripperSpec, params: Params, mu: float, part: Part) -> dict[str, str]:
-    """Which criterion removed the last pairs, and what to change."""
+def _empty_reason(rejected, total, spec: GripperSpec, params: Params, mu: float, pts, nrm) -> dict[str, str]:
+    """Which criterion removed the last pairs, and what to change.
+
+    Pairs on one face or adjacent faces fail (b) or (c) whatever the stroke, so when (b) or (c) removed the last
+    pairs, the pairs are judged once more without the stroke limit: if antipodal pairs exist but all are wider
+    than the stroke, the stroke is what to change.
+    """
     left = total
+    criterion = "stroke"
     for criterion in ("stroke", "outside", "friction", "collision"):
         left -= rejected[criterion]
         if left <= 0:
             break
-    smallest = min(part.extents) if part.extents else float("nan")
+    narrowest = None
+    if criterion in ("outside", "friction") and len(pts) > 1:
+        diag = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
+        wide = antipodal.antipodal_pairs(
+            pts,
+            nrm,
+            stroke=diag * 1.001 + 1e-9,
+            min_width=0.0,
+            friction=mu,
+            safety_factor=params.safety_factor,
+            inside=params.inside,
+            finger_thickness=spec.finger_thickness,
+        )
+        if len(wide.i):
+            narrowest = float(np.min(np.linalg.norm(pts[wide.j] - pts[wide.i], axis=1)))
+            criterion = "stroke"
     hints = {
         "stroke": (
-            f"no two surface points are within the stroke ({spec.stroke * 1e3:.1f} mm): the part is wider than the "
-            f"stroke everywhere (its smallest extent is {smallest * 1e3:.1f} mm); use a gripper with a larger stroke"
+            f"the part is wider than the stroke ({spec.stroke * 1e3:.1f} mm) everywhere"
+            + (f": its narrowest antipodal width is {narrowest * 1e3:.1f} mm" if narrowest else "")
+            + "; use a gripper with a larger stroke"
             + (f" or a smaller min_width ({spec.min_width * 1e3:.1f} mm)" if spec.min_width > 0 else "")
         ),
         "outside": (
@@ -320,4 +342,7 @@ def _empty_reason(rejected, total, spec: GripperSpec, params: Params, mu: float,
             "fingers, a smaller pregrasp_clearance, collision mode 'paper', or more rolls"
         ),
     }
-    return {"criterion": criterion, "message": hints[criterion]}
+    out = {"criterion": criterion, "message": hints[criterion]}
+    if narrowest is not None:
+        out["narrowest_antipodal_width"] = narrowest
+    return out

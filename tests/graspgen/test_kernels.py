@@ -14,8 +14,16 @@ from graspgen.gripper import GripperSpec
 
 from . import reference as ref
 
-GRIPPER = GripperSpec(name="pgn-80", stroke=0.08, finger_width=0.02, finger_depth=0.03, finger_thickness=0.01,
-                      friction=0.5, pregrasp_clearance=0.02, palm_depth=0.02)
+GRIPPER = GripperSpec(
+    name="pgn-80",
+    stroke=0.08,
+    finger_width=0.02,
+    finger_depth=0.03,
+    finger_thickness=0.01,
+    friction=0.5,
+    pregrasp_clearance=0.02,
+    palm_depth=0.02,
+)
 
 
 def _sample(mesh: trimesh.Trimesh, n: int, seed: int = 1) -> tuple[np.ndarray, np.ndarray]:
@@ -27,12 +35,18 @@ def _parts():
     ring = trimesh.creation.annulus(r_min=0.01, r_max=0.03, height=0.02, sections=48)
     box = trimesh.creation.box(extents=[0.05, 0.03, 0.02])
     cyl = trimesh.creation.cylinder(radius=0.015, height=0.06, sections=48)
+
     # a U-shaped part: a slot 6 mm wide between two prongs (narrower than two fingers)
-    u = trimesh.util.concatenate([
-        trimesh.creation.box(extents=[0.04, 0.02, 0.01], transform=trimesh.transformations.translation_matrix([0, 0, -0.015])),
-        trimesh.creation.box(extents=[0.017, 0.02, 0.03], transform=trimesh.transformations.translation_matrix([-0.0115, 0, 0.005])),
-        trimesh.creation.box(extents=[0.017, 0.02, 0.03], transform=trimesh.transformations.translation_matrix([0.0115, 0, 0.005])),
-    ])
+    def block(extents, at):
+        return trimesh.creation.box(extents=extents, transform=trimesh.transformations.translation_matrix(at))
+
+    u = trimesh.util.concatenate(
+        [
+            block([0.04, 0.02, 0.01], [0, 0, -0.015]),
+            block([0.017, 0.02, 0.03], [-0.0115, 0, 0.005]),
+            block([0.017, 0.02, 0.03], [0.0115, 0, 0.005]),
+        ]
+    )
     return {"ring": ring, "box": box, "cylinder": cyl, "u": u}
 
 
@@ -40,10 +54,12 @@ def _parts():
 @pytest.mark.parametrize("name", ["ring", "box", "u"])
 def test_pairs_equal_reference(name, inside):
     pts, nrm = _sample(_parts()[name], 1200)
-    res = antipodal_pairs(pts, nrm, stroke=0.05, min_width=0.004, friction=0.5, safety_factor=1.5, inside=inside,
-                          finger_thickness=0.01)
-    I, J, out, inn = ref.pair_criteria(pts, nrm, stroke=0.05, min_width=0.004, friction=0.5, safety_factor=1.5,
-                                       inside=inside, finger_thickness=0.01)
+    res = antipodal_pairs(
+        pts, nrm, stroke=0.05, min_width=0.004, friction=0.5, safety_factor=1.5, inside=inside, finger_thickness=0.01
+    )
+    I, J, out, inn = ref.pair_criteria(
+        pts, nrm, stroke=0.05, min_width=0.004, friction=0.5, safety_factor=1.5, inside=inside, finger_thickness=0.01
+    )
     acc = out | inn
     assert np.array_equal(res.i, I[acc]) and np.array_equal(res.j, J[acc])
     assert np.array_equal(res.inside, inn[acc])
@@ -54,8 +70,9 @@ def test_pairs_equal_reference(name, inside):
 
 def test_pair_counts_by_criterion_on_a_box():
     pts, nrm = _sample(_parts()["box"], 800)
-    res = antipodal_pairs(pts, nrm, stroke=0.04, min_width=0.0, friction=0.5, safety_factor=1.5, inside=False,
-                          finger_thickness=0.01)
+    res = antipodal_pairs(
+        pts, nrm, stroke=0.04, min_width=0.0, friction=0.5, safety_factor=1.5, inside=False, finger_thickness=0.01
+    )
     d = np.linalg.norm(pts[:, None] - pts[None], axis=2)[np.triu_indices(len(pts), 1)]
     # the box is 50 mm long: every pair farther apart than the 40 mm stroke is a stroke rejection
     assert res.rejected_stroke == int(np.sum(d > 0.04))
@@ -80,8 +97,9 @@ def test_friction_boundary(delta_deg, accepted):
     pts = np.array([[0.0, 0.0, 0.0], [0.02, 0.0, 0.0]])
     # contact 0 normal tilted by `ang` from -x; contact 1 exactly +x
     nrm = np.array([[-math.cos(ang), math.sin(ang), 0.0], [1.0, 0.0, 0.0]])
-    res = antipodal_pairs(pts, nrm, stroke=0.08, min_width=0.0, friction=0.5, safety_factor=1.5, inside=False,
-                          finger_thickness=0.01)
+    res = antipodal_pairs(
+        pts, nrm, stroke=0.08, min_width=0.0, friction=0.5, safety_factor=1.5, inside=False, finger_thickness=0.01
+    )
     assert (len(res.i) == 1) is accepted
     assert res.rejected_friction == (0 if accepted else 1)
     if accepted:
@@ -90,8 +108,9 @@ def test_friction_boundary(delta_deg, accepted):
 
 
 def _candidates(pts, nrm, inside=False):
-    res = antipodal_pairs(pts, nrm, stroke=0.08, min_width=0.0, friction=0.5, safety_factor=1.5, inside=inside,
-                          finger_thickness=0.01)
+    res = antipodal_pairs(
+        pts, nrm, stroke=0.08, min_width=0.0, friction=0.5, safety_factor=1.5, inside=inside, finger_thickness=0.01
+    )
     d = pts[res.j] - pts[res.i]
     w = np.linalg.norm(d, axis=1)
     return (pts[res.i] + pts[res.j]) / 2, d / w[:, None], w, res.inside
@@ -128,7 +147,8 @@ def test_slot_narrower_than_finger_rejects_grasps_across_it():
     fr = free_rolls(pts, nrm, mids, axes, w, inside, collision_model(GRIPPER, "paper"), 16)
     # the pairs across one prong whose finger would sit in the slot: contacts on the prong's inner wall
     inner_wall = (np.abs(np.abs(mids[:, 0] - axes[:, 0] * w / 2) - 0.003) < 1e-4) | (
-        np.abs(np.abs(mids[:, 0] + axes[:, 0] * w / 2) - 0.003) < 1e-4)
+        np.abs(np.abs(mids[:, 0] + axes[:, 0] * w / 2) - 0.003) < 1e-4
+    )
     across_x = np.abs(axes[:, 0]) > 0.95
     sel = inner_wall & across_x
     assert sel.sum() > 10
@@ -139,8 +159,16 @@ def test_paper_and_swept_differ_where_the_opening_hits_a_wall():
     """Grasping one prong of the U across its width: the contacts are free in `paper` mode (fingers of 10 mm
     fit beside the prong's outer face), but the 20 mm pre-grasp opening swings the inner finger into the slot
     wall region in `swept` mode."""
-    g = GripperSpec(name="g", stroke=0.08, finger_width=0.01, finger_depth=0.01, finger_thickness=0.002,
-                    friction=0.5, pregrasp_clearance=0.03, palm_depth=0.0)
+    g = GripperSpec(
+        name="g",
+        stroke=0.08,
+        finger_width=0.01,
+        finger_depth=0.01,
+        finger_thickness=0.002,
+        friction=0.5,
+        pregrasp_clearance=0.03,
+        palm_depth=0.0,
+    )
     pts, nrm = _sample(_parts()["u"], 3000)
     mids, axes, w, inside = _candidates(pts, nrm)
     paper = free_rolls(pts, nrm, mids, axes, w, inside, collision_model(g, "paper"), 16).any(1)
