@@ -1,0 +1,201 @@
+"""The `graspgen` CLI: exit 0 / 2 / 1, one-line reasons, no output files on bad input, a readable recording."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import trimesh
+
+from graspgen.cli import DEMO_GRIPPER, main
+
+SHARED = Path(__file__).resolve().parents[2].parent / "shared" / "meshes"
+
+
+@pytest.fixture()
+def files(tmp_path):
+    mesh = tmp_path / "box.stl"
+    trimesh.creation.box(extents=[40, 30, 20]).export(mesh)  # millimetres
+    gripper = tmp_path / "gripper.json"
+    gripper.write_text(json.dumps(DEMO_GRIPPER))
+    return tmp_path, mesh, gripper
+
+
+def _run(argv, capsys):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_generate_writes_all_outputs(files, capsys):
+    tmp, mesh, gripper = files
+    code, out, err = _run(
+        [
+            "generate",
+            mesh,
+            "--units",
+            "mm",
+            "--gripper",
+            gripper,
+            "--points",
+            800,
+            "--k1",
+            3,
+            "--k2",
+            2,
+            "--out",
+            tmp / "g.json",
+            "--candidates",
+            tmp / "c.npz",
+            "--recording",
+            tmp / "r.rrd",
+        ],
+        capsys,
+    )
+    assert code == 0, err
+    d = json.loads((tmp / "g.json").read_text())
+    assert d["format"] == "graspgen.grasp_set/1" and len(d["grasps"]) == 6
+    assert d["object"]["source_units"] == "mm" and d["object"]["name"] == "box"
+    assert (tmp / "c.npz").stat().st_size > 0
+    assert "candidates" in out and "rejected: friction" in out
+    assert not list(tmp.glob(".*.tmp"))  # no temporary left behind
+    # the recording reads back
+    rerun = shutil.which("rerun", path=str(Path(sys.executable).parent))
+    assert rerun, "the rerun CLI ships with rerun-sdk"
+    r = subprocess.run(
+        [rerun, "rrd", "verify", str(tmp / "r.rrd")],
+        capture_output=True,
+        text=True,
+        env={"RERUN_ANALYTICS": "off", "PATH": "/usr/bin:/bin"},
+        timeout=120,
+    )
+    assert r.returncode == 0, r.stderr
+
+
+def test_missing_units_shows_extents_under_each_unit(files, capsys):
+    tmp, mesh, gripper = files
+    code, out, err = _run(["generate", mesh, "--gripper", gripper, "--out", tmp / "g.json"], capsys)
+    assert code == 2
+    line = err.strip()
+    assert "\n" not in line and "--units is required" in line
+    assert "as mm: 40 x 30 x 20 mm" in line and "as in: 1016 x 762 x 508 mm" in line
+    assert not (tmp / "g.json").exists()
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"stroke": -1}, "stroke must be > 0"),
+        ({"stroke": 80}, "lengths are in metres"),
+        ({"name": "Bad Name"}, "not a slug"),
+        ({"strok": 0.1}, "unknown fields strok"),
+    ],
+)
+def test_bad_gripper_exits_2_and_writes_nothing(files, capsys, change, message):
+    tmp, mesh, gripper = files
+    gripper.write_text(json.dumps({**DEMO_GRIPPER, **change}))
+    code, out, err = _run(
+        [
+            "generate",
+            mesh,
+            "--units",
+            "mm",
+            "--gripper",
+            gripper,
+            "--out",
+            tmp / "g.json",
+            "--candidates",
+            tmp / "c.npz",
+        ],
+        capsys,
+    )
+    assert code == 2 and message in err and err.count("\n") == 1
+    assert not (tmp / "g.json").exists() and not (tmp / "c.npz").exists()
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--points", "10"], "points must be between"),
+        (["--rolls", "100"], "rolls must be between"),
+        (["--safety-factor", "0.9"], "safety_factor must be"),
+        (["--friction", "0"], "friction must be"),
+        (["--collision", "magic"], "invalid choice"),
+    ],
+)
+def test_bad_parameters_exit_2(files, capsys, args, message):
+    tmp, mesh, gripper = files
+    code, out, err = _run(
+        ["generate", mesh, "--units", "mm", "--gripper", gripper, "--out", tmp / "g.json", *args], capsys
+    )
+    assert code == 2 and message in err
+    assert not (tmp / "g.json").exists()
+
+
+def test_unreadable_mesh_exits_2(files, capsys):
+    tmp, mesh, gripper = files
+    bad = tmp / "bad.stl"
+    bad.write_bytes(b"")
+    code, out, err = _run(["generate", bad, "--units", "mm", "--gripper", gripper, "--out", tmp / "g.json"], capsys)
+    assert code == 2 and err.startswith("graspgen: error:")
+    assert not (tmp / "g.json").exists()
+    code, out, err = _run(
+        ["generate", tmp / "missing.stl", "--units", "mm", "--gripper", gripper, "--out", tmp / "g.json"], capsys
+    )
+    assert code == 2
+
+
+@pytest.mark.skipif(not (SHARED / "bad").is_dir(), reason="../shared/meshes/bad is not present")
+@pytest.mark.parametrize("name", ["empty.stl", "truncated_angle_block.stl", "idler_riser_binary_stl.obj"])
+def test_shared_bad_meshes_exit_2(files, capsys, name):
+    tmp, _, gripper = files
+    code, out, err = _run(
+        ["generate", SHARED / "bad" / name, "--units", "mm", "--gripper", gripper, "--out", tmp / "g.json"], capsys
+    )
+    assert code == 2 and err.count("\n") == 1
+    assert not (tmp / "g.json").exists()
+
+
+def test_no_grasps_says_why(tmp_path, capsys):
+    mesh = tmp_path / "big.stl"
+    trimesh.creation.box(extents=[120, 110, 100]).export(mesh)
+    g = tmp_path / "g.json"
+    g.write_text(json.dumps(DEMO_GRIPPER))
+    code, out, err = _run(
+        ["generate", mesh, "--units", "mm", "--gripper", g, "--points", 500, "--out", tmp_path / "o.json"], capsys
+    )
+    assert code == 0
+    assert "no grasps: the part is wider than the stroke (80.0 mm) everywhere" in err
+    assert json.loads((tmp_path / "o.json").read_text())["grasps"] == []
+
+
+def test_console_script_runs(files):
+    tmp, mesh, gripper = files
+    exe = Path(sys.executable).parent / "graspgen"
+    r = subprocess.run(
+        [
+            str(exe),
+            "generate",
+            str(mesh),
+            "--units",
+            "mm",
+            "--gripper",
+            str(gripper),
+            "--points",
+            "400",
+            "--out",
+            str(tmp / "x.json"),
+            "--quiet",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert r.returncode == 0, r.stderr
+    assert r.stdout == "" and "[" not in r.stderr  # quiet, and no progress bar off a terminal
+    r = subprocess.run([str(exe), "generate"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2
