@@ -78,7 +78,6 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    os.environ.setdefault("RERUN_ANALYTICS", "off")  # never phone home from a plant network
     if argv and argv[0] in ("serve", "worker", "migrate"):
         from services.cli import main as service_main
 
