@@ -205,6 +205,8 @@ def _run_and_write(run, outputs: dict[str, Path | None], *, quiet: bool) -> int:
         bar.close()
         for tmp in temps.values():
             tmp.unlink(missing_ok=True)
+    for warning in result.stats.get("warnings", []):
+        print(f"graspgen: warning: {warning}", file=sys.stderr)
     if not quiet:
         print(_summary(result))
     if not result.grasps:

@@ -129,5 +129,3 @@ def _check_number(field: str, value: Any, *, positive: bool) -> None:
         raise InvalidGripperError(f"{field} must be > 0, got {value}", field=field)
     if not positive and value < 0:
         raise InvalidGripperError(f"{field} must be >= 0, got {value}", field=field)
-
-

@@ -24,6 +24,8 @@ __all__ = ["generate", "recluster", "STAGES", "choose_roll"]
 
 #: the stages reported to progress callbacks, in order
 STAGES = ("load", "sample", "pairs", "collision", "cluster", "export")
+#: the collision stage reports progress this many times
+_COLLISION_BATCHES = 10
 
 Progress = Callable[[str, float], None]
 
@@ -116,10 +118,18 @@ def generate(
     axes = d / widths[:, None] if len(d) else np.zeros((0, 3))
     mids = 0.5 * (pts[pairs.i] + pts[pairs.j])
     model = _collision.collision_model(spec, params.collision)
-    free = _collision.free_rolls(pts, nrm, mids, axes, widths, pairs.inside, model, params.rolls)
+    free = np.zeros((len(mids), params.rolls), dtype=bool)
+    # in batches, so that progress (and a cancel) is reported within the longest stage
+    bounds = np.linspace(0, len(mids), _COLLISION_BATCHES + 1).astype(np.int64)
+    for b, (lo, hi) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
+        if hi > lo:
+            sl = slice(lo, hi)
+            free[sl] = _collision.free_rolls(
+                pts, nrm, mids[sl], axes[sl], widths[sl], pairs.inside[sl], model, params.rolls
+            )
+        report("collision", (b + 1) / _COLLISION_BATCHES)
     keep = free.any(axis=1)
     timings["collision"] = time.perf_counter() - t0
-    report("collision", 1.0)
 
     ci, cj = pairs.i[keep], pairs.j[keep]
     cands = Candidates(
@@ -147,6 +157,7 @@ def generate(
         "spacing_mean": float(sample.spacing),
         "spacing_min": float(sample.min_spacing),
         "watertight": bool(part.watertight),
+        "warnings": list(part.warnings),
     }
     if len(cands) == 0:
         stats["empty_reason"] = _empty_reason(rejected, pairs.pairs_total, spec, params, mu, pts, nrm)

@@ -18,9 +18,7 @@ def to_metres_scale(units: str | None) -> float:
         raise InvalidUnitsError("units are required: one of " + ", ".join(UNIT_SCALE), field="units")
     key = str(units).strip().lower()
     if key not in UNIT_SCALE:
-        raise InvalidUnitsError(
-            f"unknown units {units!r}: use one of " + ", ".join(UNIT_SCALE), field="units"
-        )
+        raise InvalidUnitsError(f"unknown units {units!r}: use one of " + ", ".join(UNIT_SCALE), field="units")
     return UNIT_SCALE[key]
 
 
