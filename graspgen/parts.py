@@ -44,6 +44,7 @@ __all__ = [
     "Part",
     "load_part",
     "read_raw_extents",
+    "estimate_normals",
     "MESH_TYPES",
     "POINT_CLOUD_TYPES",
     "MAX_EXTENT",
