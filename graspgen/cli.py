@@ -68,7 +68,7 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("--recording", help="Rerun .rrd to write")
     g.add_argument("--quiet", action="store_true", help="no summary table")
     d = sub.add_parser("demo", help="grasps for a shipped example part, written to out/demo/")
-    d.add_argument("--part", default="ring_screw", help="example part (default ring_screw)")
+    d.add_argument("--part", default="ring-screw", help="example part (default ring-screw)")
     _add_run_options(d)
     d.add_argument("--out-dir", default="out/demo")
     for name in ("serve", "worker", "migrate"):

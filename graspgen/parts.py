@@ -38,7 +38,7 @@ from scipy.spatial import cKDTree
 from trimesh.exchange.ply import load_ply
 
 from .errors import InvalidMeshError
-from .units import UNIT_SCALE, extents_under_each_unit, to_metres_scale
+from .units import UNIT_SCALE, extents_under_each_unit, to_metres, to_metres_scale
 
 __all__ = [
     "Part",
@@ -381,7 +381,7 @@ def _check_not_flat(vertices: np.ndarray, label: str) -> None:
 
 
 def _mesh_part(raw: _Raw, scale: float, name: str, units: str) -> Part:
-    vertices = raw.vertices * scale
+    vertices = to_metres(raw.vertices, units)
     mesh = trimesh.Trimesh(vertices, raw.faces, process=False, validate=False)
     mesh.merge_vertices(merge_tex=True, merge_norm=True)
     faces = _clean_faces(np.asarray(mesh.faces, dtype=np.int64))
@@ -436,7 +436,7 @@ def _clean_faces(faces: np.ndarray) -> np.ndarray:
 
 
 def _point_cloud_part(raw: _Raw, scale: float, name: str, units: str) -> Part:
-    points = raw.vertices * scale
+    points = to_metres(raw.vertices, units)
     normals = raw.normals
     # exact duplicates carry no information and break neighbourhoods and spacing; keep first occurrences
     _, first = np.unique(points, axis=0, return_index=True)
