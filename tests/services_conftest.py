@@ -291,3 +291,44 @@ def s3_server(tmp_path_factory) -> Iterator[dict[str, str]]:
                 os.environ.pop(k, None)
             else:
                 os.environ[k] = v
+
+
+# -- processes ----------------------------------------------------------------------------------------------------
+def wait_for_log(path: Path, needle: str, proc, timeout: float = 90.0) -> None:  # type: ignore[no-untyped-def]
+    import time
+
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        text = path.read_text(errors="replace") if path.exists() else ""
+        if needle in text:
+            return
+        if proc.poll() is not None:
+            raise RuntimeError(f"process exited with {proc.returncode}:\n{text[-3000:]}")
+        time.sleep(0.1)
+    raise TimeoutError(f"{needle!r} not in {path} after {timeout} s:\n{path.read_text(errors='replace')[-3000:]}")
+
+
+def stop_process(proc, timeout: float = 30.0) -> None:  # type: ignore[no-untyped-def]
+    """SIGTERM (Celery's warm shutdown, uvicorn's graceful stop), then SIGKILL; only this process and its children."""
+    import signal
+    import subprocess
+
+    if proc.poll() is not None:
+        return
+    proc.send_signal(signal.SIGTERM)
+    try:
+        proc.wait(timeout)
+    except subprocess.TimeoutExpired:
+        import psutil
+
+        for child in psutil.Process(proc.pid).children(recursive=True):
+            child.kill()
+        proc.kill()
+        proc.wait(10)
+
+
+def settings_env(**values: object) -> dict[str, str]:
+    """os.environ plus GRASPGEN_* variables for a subprocess."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("GRASPGEN_")}
+    env.update({f"GRASPGEN_{k.upper()}": str(v) for k, v in values.items() if v is not None})
+    return env
