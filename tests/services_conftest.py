@@ -268,9 +268,12 @@ def s3_server(tmp_path_factory) -> Iterator[dict[str, str]]:
     import sys
 
     port = free_port()
-    log = open(tmp_path_factory.mktemp("moto") / "moto.log", "wb")
-    proc = subprocess.Popen([sys.executable, "-m", "moto.server", "-H", "127.0.0.1", "-p", str(port)],
-                            stdout=log, stderr=subprocess.STDOUT)
+    with open(tmp_path_factory.mktemp("moto") / "moto.log", "wb") as log:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "moto.server", "-H", "127.0.0.1", "-p", str(port)],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+        )
     env = {"AWS_ACCESS_KEY_ID": "testing", "AWS_SECRET_ACCESS_KEY": "testing", "AWS_DEFAULT_REGION": "us-east-1"}
     saved = {k: os.environ.get(k) for k in env}
     os.environ.update(env)
@@ -285,7 +288,6 @@ def s3_server(tmp_path_factory) -> Iterator[dict[str, str]]:
     finally:
         proc.terminate()
         proc.wait(10)
-        log.close()
         for k, v in saved.items():
             if v is None:
                 os.environ.pop(k, None)

@@ -7,7 +7,7 @@ import json
 import pytest
 from services_conftest import write_tokens_file
 
-from services.common.tokens import Principal, TokenStore, TokensFileError, bootstrap_tokens_file, hash_token
+from services.common.tokens import Principal, TokensFileError, TokenStore, bootstrap_tokens_file, hash_token
 
 pytestmark = pytest.mark.integration
 
@@ -32,8 +32,12 @@ PROTECTED = [
 
 @pytest.mark.parametrize(("method", "url"), PROTECTED)
 def test_every_route_needs_a_valid_token(pg_service, method, url):
-    for headers in ({}, {"Authorization": "Bearer nope"}, {"Authorization": "Basic dXNlcjpwYXNz"},
-                    {"Authorization": f"Bearer {pg_service.tokens['reader']}x"}):
+    for headers in (
+        {},
+        {"Authorization": "Bearer nope"},
+        {"Authorization": "Basic dXNlcjpwYXNz"},
+        {"Authorization": f"Bearer {pg_service.tokens['reader']}x"},
+    ):
         r = pg_service.client.request(method, url, headers=headers)
         assert r.status_code == 401, (headers, r.text)
         assert r.headers["content-type"] == PROBLEM and r.headers["www-authenticate"].startswith("Bearer")
@@ -76,8 +80,11 @@ def test_token_store_hashes_rotates_and_fails_fast(tmp_path):
     # a broken rewrite keeps the last good set rather than locking everyone out
     path.write_text("{broken")
     assert store.authenticate("fresh-token").name == "new"
-    for bad in ("{broken", '{"tokens": [{"name": "a", "sha256": "xyz", "scopes": ["read"]}]}',
-                '{"tokens": [{"name": "a", "sha256": "' + "0" * 64 + '", "scopes": ["root"]}]}'):
+    for bad in (
+        "{broken",
+        '{"tokens": [{"name": "a", "sha256": "xyz", "scopes": ["read"]}]}',
+        '{"tokens": [{"name": "a", "sha256": "' + "0" * 64 + '", "scopes": ["root"]}]}',
+    ):
         path.write_text(bad)
         with pytest.raises(TokensFileError):
             TokenStore(path)

@@ -39,8 +39,17 @@ def test_submit_commits_the_row_and_queues_one_message(pg_service, pair):
     assert job["state"] == "queued" and job["kind"] == "generate" and job["progress"] == 0
     assert job["object"] == obj and job["object_version"] == 1 and job["gripper"] == grip
     # friction resolved from the gripper: the stored parameters are complete
-    assert job["params"] == {"points": 500, "friction": 0.5, "safety_factor": 1.5, "rolls": 16, "k1": 4, "k2": 4,
-                             "inside": False, "collision": "swept", "seed": 0}
+    assert job["params"] == {
+        "points": 500,
+        "friction": 0.5,
+        "safety_factor": 1.5,
+        "rolls": 16,
+        "k1": 4,
+        "k2": 4,
+        "inside": False,
+        "collision": "swept",
+        "seed": 0,
+    }
     assert queued_messages(pg_service) == before + 1
     got = pg_service.get(r.headers["location"])
     assert got.status_code == 200 and got.json()["id"] == job["id"] and "retry-after" in got.headers
@@ -163,8 +172,13 @@ def test_broker_down_is_503_and_leaves_no_rows(pg_schema, tmp_path, pg_service, 
     from services.common.settings import Settings
 
     tokens = write_tokens_file(tmp_path / "tokens.json")
-    settings = Settings(database_url=PG_URL, database_schema=pg_schema, storage_dir=tmp_path / "var",
-                        tokens_file=tmp_path / "tokens.json", broker_url="redis://127.0.0.1:1/0")
+    settings = Settings(
+        database_url=PG_URL,
+        database_schema=pg_schema,
+        storage_dir=tmp_path / "var",
+        tokens_file=tmp_path / "tokens.json",
+        broker_url="redis://127.0.0.1:1/0",
+    )
     with TestClient(create_app(settings)) as client:
         svc = Service(client, settings, tokens)
         obj, grip = pair

@@ -48,7 +48,7 @@ def test_file_download_is_the_upload_with_strong_etag(pg_service):
     etag = r.headers["etag"]
     assert etag == f'"{hashlib.sha256(data).hexdigest()}"'
     assert "immutable" in r.headers["cache-control"]
-    assert f'{name}-v1.stl' in r.headers["content-disposition"]
+    assert f"{name}-v1.stl" in r.headers["content-disposition"]
     again = pg_service.get(f"/v1/objects/{name}/versions/1/file", headers={"If-None-Match": etag})
     assert again.status_code == 304 and again.content == b""
 
@@ -102,17 +102,18 @@ def test_upload_over_the_limit_is_413_while_streaming(pg_service):
     # chunked: no Content-Length, the running count cuts it off
     def chunks():
         body = (
-            b"--b\r\nContent-Disposition: form-data; name=\"name\"\r\n\r\nbig-1\r\n"
-            b"--b\r\nContent-Disposition: form-data; name=\"units\"\r\n\r\nmm\r\n"
-            b"--b\r\nContent-Disposition: form-data; name=\"file\"; filename=\"a.stl\"\r\n\r\n"
+            b'--b\r\nContent-Disposition: form-data; name="name"\r\n\r\nbig-1\r\n'
+            b'--b\r\nContent-Disposition: form-data; name="units"\r\n\r\nmm\r\n'
+            b'--b\r\nContent-Disposition: form-data; name="file"; filename="a.stl"\r\n\r\n'
         )
         yield body
         for i in range(0, len(big), 65536):
             yield big[i : i + 65536]
         yield b"\r\n--b--\r\n"
 
-    r = pg_service.client.post("/v1/objects", headers={**pg_service.h(), "Content-Type": "multipart/form-data; boundary=b"},
-                               content=chunks())
+    r = pg_service.client.post(
+        "/v1/objects", headers={**pg_service.h(), "Content-Type": "multipart/form-data; boundary=b"}, content=chunks()
+    )
     assert r.status_code == 413 and r.headers["content-type"] == PROBLEM
     # declared: refused before reading
     r = pg_service.upload("big-2", big)

@@ -45,7 +45,7 @@ def schema(tmp_path_factory):
 
 def test_every_contract_route_is_documented(schema):
     documented = {(m, p) for p, ops in schema["paths"].items() for m in ops}
-    assert CONTRACT_ROUTES <= documented
+    assert documented >= CONTRACT_ROUTES
 
 
 def test_protected_routes_declare_bearer_security_and_problems(schema):

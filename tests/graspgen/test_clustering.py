@@ -212,9 +212,9 @@ def test_large_n_never_builds_the_full_matrix_and_finds_the_blobs(monkeypatch):
     sizes = []
     original = clustering._pairwise
 
-    def spy(A, metric):
+    def spy(A, metric, threads=True):
         sizes.append(A.shape[0])
-        return original(A, metric)
+        return original(A, metric, threads)
 
     monkeypatch.setattr(clustering, "_pairwise", spy)
     r = kmedoids(X, 5, exact_limit=4000, sample_size=500, draws=3)

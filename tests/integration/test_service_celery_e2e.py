@@ -58,8 +58,19 @@ def stack(pg_schema, s3_server, tmp_path_factory):
     log = root / "worker.log"
     with open(log, "wb") as out:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "services.cli", "worker", "--concurrency", "1", "--hostname", f"{unique_name('w')}@%h"],
-            env=settings_env(**values), stdout=out, stderr=subprocess.STDOUT,
+            [
+                sys.executable,
+                "-m",
+                "services.cli",
+                "worker",
+                "--concurrency",
+                "1",
+                "--hostname",
+                f"{unique_name('w')}@%h",
+            ],
+            env=settings_env(**values),
+            stdout=out,
+            stderr=subprocess.STDOUT,
         )
     try:
         wait_for_log(log, " ready.", proc)
@@ -127,7 +138,9 @@ def test_idempotent_submission_runs_once(stack, pair):
 def test_cancel_a_running_job(stack, pair):
     svc, _, _ = stack
     obj, grip = pair
-    jid = svc.post("/v1/jobs", json={"object": obj, "gripper": grip, "params": {"points": 3000, "seed": 9}}).json()["id"]
+    jid = svc.post("/v1/jobs", json={"object": obj, "gripper": grip, "params": {"points": 3000, "seed": 9}}).json()[
+        "id"
+    ]
     end = time.monotonic() + 60
     while svc.get(f"/v1/jobs/{jid}").json()["state"] == "queued" and time.monotonic() < end:
         time.sleep(0.02)
@@ -163,7 +176,9 @@ def test_killed_worker_process_redelivers_without_a_second_version(stack, pair):
 
     svc, proc, log = stack
     obj, grip = pair
-    jid = svc.post("/v1/jobs", json={"object": obj, "gripper": grip, "params": {"points": 2000, "seed": 17}}).json()["id"]
+    jid = svc.post("/v1/jobs", json={"object": obj, "gripper": grip, "params": {"points": 2000, "seed": 17}}).json()[
+        "id"
+    ]
     end = time.monotonic() + 60
     while svc.get(f"/v1/jobs/{jid}").json()["state"] != "running" and time.monotonic() < end:
         time.sleep(0.02)

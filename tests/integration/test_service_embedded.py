@@ -7,6 +7,7 @@ import re
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import httpx
 import pytest
@@ -30,8 +31,10 @@ def start(storage_dir, log_path):  # type: ignore[no-untyped-def]
     port = free_port()
     with open(log_path, "wb") as out:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "services.cli", "serve", "--port", str(port)],
-            env=settings_env(storage_dir=storage_dir), stdout=out, stderr=subprocess.STDOUT,
+            [str(Path(sys.executable).with_name("graspgen")), "serve", "--port", str(port)],
+            env=settings_env(storage_dir=storage_dir),
+            stdout=out,
+            stderr=subprocess.STDOUT,
         )
     try:
         wait_for_log(log_path, "Uvicorn running", proc)
@@ -61,7 +64,9 @@ def test_graspgen_serve_embedded_whole_flow(tmp_path):
         with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {token}"}, timeout=30) as c:
             assert httpx.get(url + "/readyz").json()["checks"]["broker"] == "ok"
             assert httpx.get(url + "/v1/objects").status_code == 401
-            up = c.post("/v1/objects", files={"file": ("ring.stl", cylinder_stl())}, data={"name": "ring", "units": "mm"})
+            up = c.post(
+                "/v1/objects", files={"file": ("ring.stl", cylinder_stl())}, data={"name": "ring", "units": "mm"}
+            )
             assert up.status_code == 201, up.text
             assert c.post("/v1/grippers", json=GRIPPER).status_code == 201
             job = c.post("/v1/jobs", json={"object": "ring", "gripper": "pgn-80", "params": SMALL})
@@ -74,8 +79,12 @@ def test_graspgen_serve_embedded_whole_flow(tmp_path):
             assert [i["object"] for i in cat["items"]] == ["ring"]
 
             # one in-process worker thread: a long job runs while the next one waits in the queue
-            assert c.post("/v1/objects", files={"file": ("b.stl", box_stl())}, data={"name": "box", "units": "mm"}
-                          ).status_code == 201
+            assert (
+                c.post(
+                    "/v1/objects", files={"file": ("b.stl", box_stl())}, data={"name": "box", "units": "mm"}
+                ).status_code
+                == 201
+            )
             slow = c.post("/v1/jobs", json={"object": "box", "gripper": "pgn-80", "params": {"points": 3000}}).json()
             waiting = c.post("/v1/jobs", json={"object": "box", "gripper": "pgn-80", "params": SMALL}).json()
             assert c.post(f"/v1/jobs/{waiting['id']}/cancel").json()["state"] == "cancelled"
@@ -86,10 +95,15 @@ def test_graspgen_serve_embedded_whole_flow(tmp_path):
             assert wait_job(c, slow["id"])["state"] == "cancelled"
             assert wait_job(c, waiting["id"])["state"] == "cancelled"
 
-            bulk = c.post("/v1/bulk-jobs", json={"items": [
-                {"object": "box", "gripper": "pgn-80", "params": SMALL},
-                {"object": "box", "gripper": "no-such-gripper"},
-            ]}).json()
+            bulk = c.post(
+                "/v1/bulk-jobs",
+                json={
+                    "items": [
+                        {"object": "box", "gripper": "pgn-80", "params": SMALL},
+                        {"object": "box", "gripper": "no-such-gripper"},
+                    ]
+                },
+            ).json()
             parent = wait_job(c, bulk["id"])
             assert parent["state"] == "succeeded" and [i["state"] for i in parent["items"]] == ["succeeded", "failed"]
     finally:

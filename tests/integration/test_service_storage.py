@@ -18,8 +18,11 @@ def storage(request, tmp_path):
     if request.param == "local":
         return LocalStorage(tmp_path)
     s3 = request.getfixturevalue("s3_server")
-    return make_storage(Settings(storage_dir=tmp_path, storage_url=f"s3://{s3['bucket']}/run/{tmp_path.name}",
-                                 s3_endpoint_url=s3["endpoint"]))
+    return make_storage(
+        Settings(
+            storage_dir=tmp_path, storage_url=f"s3://{s3['bucket']}/run/{tmp_path.name}", s3_endpoint_url=s3["endpoint"]
+        )
+    )
 
 
 def test_content_addressed_put_get(storage, tmp_path):
@@ -51,8 +54,11 @@ def test_missing_and_invalid_keys(storage):
 
 
 def test_s3_backend_is_selected_by_url(s3_server, tmp_path):
-    st = make_storage(Settings(storage_dir=tmp_path, storage_url=f"s3://{s3_server['bucket']}/p",
-                               s3_endpoint_url=s3_server["endpoint"]))
+    st = make_storage(
+        Settings(
+            storage_dir=tmp_path, storage_url=f"s3://{s3_server['bucket']}/p", s3_endpoint_url=s3_server["endpoint"]
+        )
+    )
     assert isinstance(st, S3Storage) and st.bucket == s3_server["bucket"] and st.prefix == "p"
     blob = st.put_bytes(b"x")
     import boto3

@@ -66,8 +66,15 @@ def test_worker_without_broker_is_refused(monkeypatch, tmp_path, capsys):
 
 
 def test_celery_configuration():
-    s = Settings(broker_url="redis://127.0.0.1:6379/3", broker_key_prefix="p:", queue="q1", job_soft_time_limit_s=60,
-                 job_time_limit_s=90, broker_visibility_timeout_s=120, worker_max_tasks_per_child=7)
+    s = Settings(
+        broker_url="redis://127.0.0.1:6379/3",
+        broker_key_prefix="p:",
+        queue="q1",
+        job_soft_time_limit_s=60,
+        job_time_limit_s=90,
+        broker_visibility_timeout_s=120,
+        worker_max_tasks_per_child=7,
+    )
     conf = make_celery(s).conf
     assert conf.task_acks_late and conf.task_reject_on_worker_lost
     assert conf.worker_prefetch_multiplier == 1

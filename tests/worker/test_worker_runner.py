@@ -4,7 +4,6 @@ re-clustering, and the .rrd each job writes."""
 from __future__ import annotations
 
 import io
-import json
 import subprocess
 import sys
 import uuid
@@ -45,8 +44,9 @@ def submit(svc, obj, grip, params=SMALL, **extra) -> str:
 
 def grasp_sets_of(svc, job_id: str) -> int:
     with svc.app.state.db.session() as s:
-        return s.execute(select(func.count()).select_from(GraspSet).where(GraspSet.job_id == uuid.UUID(job_id))
-                         ).scalar_one()
+        return s.execute(
+            select(func.count()).select_from(GraspSet).where(GraspSet.job_id == uuid.UUID(job_id))
+        ).scalar_one()
 
 
 def test_run_stores_result_rows_and_artifacts(pg_service, runner, pair):
@@ -96,8 +96,11 @@ def test_a_job_whose_worker_keeps_dying_fails(pg_service, runner, pair):
     obj, grip = pair
     jid = submit(pg_service, obj, grip, {**SMALL, "seed": 13})
     with pg_service.app.state.db.session() as s:
-        s.execute(update(Job).where(Job.id == uuid.UUID(jid)).values(
-            state="running", attempts=pg_service.settings.job_max_attempts))
+        s.execute(
+            update(Job)
+            .where(Job.id == uuid.UUID(jid))
+            .values(state="running", attempts=pg_service.settings.job_max_attempts)
+        )
     assert runner.run(jid) == "failed"
     job = pg_service.get(f"/v1/jobs/{jid}").json()
     assert job["error"]["code"] == "worker-lost" and job["grasp_set"] is None
@@ -153,8 +156,9 @@ def test_cluster_job_reclusters_into_a_derived_version(pg_service, runner, pair)
     assert runner.run(r.json()["id"]) == "succeeded"
     job = pg_service.get(f"/v1/jobs/{r.json()['id']}").json()
     assert job["kind"] == "cluster" and job["source_grasp_set"] == src
-    summary = next(i for i in pg_service.get(f"/v1/grasp-sets?object={obj}").json()["items"]
-                   if i["id"] == job["grasp_set"])
+    summary = next(
+        i for i in pg_service.get(f"/v1/grasp-sets?object={obj}").json()["items"] if i["id"] == job["grasp_set"]
+    )
     assert summary["derived_from"] == src and summary["version"] == 2
     export = pg_service.get(f"/v1/grasp-sets/{job['grasp_set']}").json()
     assert export["params"]["k1"] == 2 and len(export["grasps"]) <= 2
