@@ -28,8 +28,10 @@ cluster). The same inputs and seed give identical labels and medoids.
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from numba import njit, prange
 
@@ -43,7 +45,15 @@ __all__ = [
     "kmedoids",
     "two_stage",
     "dissimilarities",
+    "EXACT_LIMIT",
+    "DRAWS",
 ]
+
+#: kmedoids() defaults, also used by two_stage(): full-matrix FasterPAM up to this many points (128 MB), ...
+EXACT_LIMIT = 4000
+#: ... and this many seedings (exact) or samples (above EXACT_LIMIT), the lowest loss kept
+DRAWS = 5
+MAX_ITER = 100
 
 #: metric name -> kernel code
 METRICS: dict[str, int] = {"euclidean": 0, "axis": 1}
@@ -180,11 +190,12 @@ def _pairwise_parallel(X, metric):
     return D
 
 
-def _pairwise(X: np.ndarray, metric: int) -> np.ndarray:
+def _pairwise(X: np.ndarray, metric: int, threads: bool = True) -> np.ndarray:
     """(n, n) distances between the rows of X: the upper triangle (the axis angle costs a transcendental per pair;
-    _dist is exactly symmetric), then a blocked mirror."""
+    _dist is exactly symmetric), then a blocked mirror. Serial and parallel kernels give identical results."""
     n = X.shape[0]
-    return (_pairwise_parallel if n * n // 2 >= _PARALLEL_MIN_WORK else _pairwise_serial)(X, metric)
+    big = threads and n * n // 2 >= _PARALLEL_MIN_WORK
+    return (_pairwise_parallel if big else _pairwise_serial)(X, metric)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -234,10 +245,10 @@ def _assign_parallel(X, C, metric):
     return labels, dist
 
 
-def _assign(X: np.ndarray, C: np.ndarray, metric: int) -> tuple[np.ndarray, np.ndarray]:
+def _assign(X: np.ndarray, C: np.ndarray, metric: int, threads: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """(n,) int32 nearest row of C for every row of X (first one on ties), (n,) float64 distance to it."""
-    work = X.shape[0] * C.shape[0]
-    return (_assign_parallel if work >= _PARALLEL_MIN_WORK else _assign_serial)(X, C, metric)
+    big = threads and X.shape[0] * C.shape[0] >= _PARALLEL_MIN_WORK
+    return (_assign_parallel if big else _assign_serial)(X, C, metric)
 
 
 @njit(cache=True, nogil=True)
@@ -538,7 +549,7 @@ def dissimilarities(X: np.ndarray, *, metric: str = "euclidean") -> np.ndarray:
 
 
 def fasterpam(
-    diss: np.ndarray, k: int, *, seed: int = 0, max_iter: int = 100, init: np.ndarray | None = None
+    diss: np.ndarray, k: int, *, seed: int = 0, max_iter: int = MAX_ITER, init: np.ndarray | None = None
 ) -> KMedoidsResult:
     """FasterPAM on an (n, n) float64 dissimilarity matrix (finite, >= 0, symmetric; a zero diagonal is assumed).
 
@@ -588,10 +599,10 @@ def kmedoids(
     *,
     metric: str = "euclidean",
     seed: int = 0,
-    exact_limit: int = 4000,
-    draws: int = 5,
+    exact_limit: int = EXACT_LIMIT,
+    draws: int = DRAWS,
     sample_size: int | None = None,
-    max_iter: int = 100,
+    max_iter: int = MAX_ITER,
 ) -> KMedoidsResult:
     """k-medoids of the rows of X (n, d) under `metric` ("euclidean", or "axis": arccos |a . b| of the normalised rows).
 
@@ -612,13 +623,30 @@ def kmedoids(
     A = _check_points("X", X)
     if code == _AXIS:
         A = _unit_rows("X", A)
+    return _kmedoids(A, k, code, seed, exact_limit, draws, sample_size, max_iter, threads=True)
+
+
+def _kmedoids(
+    A: np.ndarray,
+    k: int,
+    code: int,
+    seed: int,
+    exact_limit: int,
+    draws: int,
+    sample_size: int,
+    max_iter: int,
+    *,
+    threads: bool,
+) -> KMedoidsResult:
+    """kmedoids() on checked (and for "axis" normalised) points; `threads=False` keeps every kernel on the calling
+    thread, for callers that run several of these at once."""
     n = A.shape[0]
     if n <= k:
         return _all_own(n)
     rng = np.random.default_rng(seed)
 
     if n <= exact_limit:
-        D = _pairwise(A, code)
+        D = _pairwise(A, code, threads)
         best = None
         for _ in range(draws):
             med, labels, loss, n_iter = _run(D, k, rng, max_iter)
@@ -636,9 +664,9 @@ def kmedoids(
             extra = extra[~np.isin(extra, best[0])][: s - k]
             sample = np.concatenate([best[0], extra])
         sample = np.sort(sample)
-        med_s, _, _, n_iter = _run(_pairwise(A[sample], code), k, rng, max_iter)
+        med_s, _, _, n_iter = _run(_pairwise(A[sample], code, threads), k, rng, max_iter)
         med = sample[med_s]
-        labels, dist = _assign(A, np.ascontiguousarray(A[med]), code)
+        labels, dist = _assign(A, np.ascontiguousarray(A[med]), code, threads)
         labels[med] = np.arange(k, dtype=np.int32)  # duplicates of a medoid belong to their own medoid
         dist[med] = 0.0
         loss = float(np.sum(dist))
@@ -690,14 +718,35 @@ def two_stage(midpoints: np.ndarray, axes: np.ndarray, k1: int, k2: int, *, seed
     labels[:, 0] = r1.labels
     order = np.argsort(r1.labels, kind="stable")  # members of each cluster in index order
     bounds = np.concatenate([[0], np.cumsum(np.bincount(r1.labels, minlength=r1.medoids.size))])
+    groups = [order[bounds[t] : bounds[t + 1]] for t in range(r1.medoids.size)]
+
+    def stage_two(t: int, threads: bool) -> KMedoidsResult:
+        if all_returned:
+            return _all_own(groups[t].size)
+        return _kmedoids(
+            U[groups[t]],
+            k2,
+            _AXIS,
+            _sub_seed(seed, 2, t),
+            EXACT_LIMIT,
+            DRAWS,
+            _default_sample_size(k2),
+            MAX_ITER,
+            threads=threads,
+        )
+
+    # the translation clusters are independent: one per core, each on a single thread (the kernels release the GIL);
+    # the result does not depend on the schedule
+    workers = min(numba.get_num_threads(), len(groups))
+    if workers > 1 and not all_returned:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            second = list(pool.map(lambda t: stage_two(t, False), range(len(groups))))
+    else:
+        second = [stage_two(t, True) for t in range(len(groups))]
+
     medoids, clusters, sizes = [], [], []
     loss_direction = 0.0
-    for t in range(r1.medoids.size):
-        members = order[bounds[t] : bounds[t + 1]]
-        if all_returned:
-            r2 = _all_own(members.size)
-        else:
-            r2 = kmedoids(U[members], k2, metric="axis", seed=_sub_seed(seed, 2, t))
+    for t, (members, r2) in enumerate(zip(groups, second, strict=True)):
         labels[members, 1] = r2.labels
         loss_direction += r2.loss
         m = r2.medoids.size
