@@ -7,6 +7,7 @@ import threading
 
 from celery import Task
 from celery.exceptions import TimeLimitExceeded
+from sqlalchemy.exc import OperationalError
 
 from services.common.settings import Settings
 from services.worker.celery_app import celery_app
@@ -46,7 +47,16 @@ class JobTask(Task):
                 log.exception("could not mark job %s failed after the hard time limit", args[0])
 
 
-@celery_app.task(name="graspgen.run_job", base=JobTask, bind=True)
+@celery_app.task(
+    name="graspgen.run_job",
+    base=JobTask,
+    bind=True,
+    # the database was unreachable: the job row could not even be claimed or finished, so try again later
+    autoretry_for=(OperationalError,),
+    retry_backoff=2,
+    retry_backoff_max=60,
+    max_retries=5,
+)
 def run_job(self: Task, job_id: str) -> str:
     """Run job `job_id` and return its final state. Redelivery of a finished job does nothing."""
     return get_runner().run(job_id)
