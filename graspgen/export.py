@@ -32,6 +32,9 @@ class Candidates:
     inside: np.ndarray  # (n,) bool
     labels: np.ndarray  # (n, 2) int32 (translation cluster, direction cluster); -1 before clustering
     medoids: np.ndarray  # (m,) int64, export order
+    #: optional, present when quality was scored (quality.py): (n, 3) terms and the part's centre of mass (3,)
+    quality_terms: np.ndarray | None = None
+    center_of_mass: np.ndarray | None = None
 
     @property
     def midpoints(self) -> np.ndarray:
@@ -50,6 +53,11 @@ class Candidates:
         return len(self.contacts)
 
     def arrays(self) -> dict[str, np.ndarray]:
+        extra = {
+            k: getattr(self, k).astype(np.float64)
+            for k in ("quality_terms", "center_of_mass")
+            if getattr(self, k) is not None
+        }
         return {
             "contacts": self.contacts,
             "normals": self.normals,
@@ -61,6 +69,7 @@ class Candidates:
             "labels": self.labels.astype(np.int32),
             "medoids": self.medoids.astype(np.int64),
             "inside": self.inside,
+            **extra,
         }
 
 
@@ -92,7 +101,17 @@ def load_candidates(path: str | os.PathLike) -> Candidates:
         inside=data.get("inside", np.zeros(n, dtype=bool)).astype(bool),
         labels=data.get("labels", np.full((n, 2), -1, dtype=np.int32)).astype(np.int32),
         medoids=data.get("medoids", np.zeros(0, dtype=np.int64)).astype(np.int64),
+        quality_terms=_optional(data, "quality_terms", (n, 3)),
+        center_of_mass=_optional(data, "center_of_mass", (3,)),
     )
+
+
+def _optional(data: dict[str, np.ndarray], key: str, shape: tuple[int, ...]) -> np.ndarray | None:
+    if key not in data:
+        return None
+    if data[key].shape != shape:
+        raise InvalidCandidatesError(f"{key} must have shape {shape}, got {data[key].shape}")
+    return data[key].astype(np.float64)
 
 
 def write_atomic(path: str | os.PathLike, data: bytes) -> None:

@@ -6,13 +6,15 @@ import math
 import os
 import time
 from collections.abc import Callable
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 import trimesh
 
-from . import antipodal, clustering, sampling
+from . import antipodal, clustering, quality, sampling
 from . import collision as _collision
+from .coverage import coverage
 from .errors import InvalidParameterError, InvalidUnitsError
 from .export import Candidates, GraspSet
 from .gripper import GripperSpec
@@ -22,8 +24,8 @@ from .transforms import grasp_frames, roll_angles_rad
 
 __all__ = ["generate", "recluster", "STAGES", "choose_roll"]
 
-#: the stages reported to progress callbacks, in order
-STAGES = ("load", "sample", "pairs", "collision", "cluster", "export")
+#: the stages reported to progress callbacks, in order ("validate" only with validate=True)
+STAGES = ("load", "sample", "pairs", "collision", "cluster", "validate", "export")
 #: the collision stage reports progress this many times
 _COLLISION_BATCHES = 10
 
@@ -52,13 +54,24 @@ def generate(
     progress: Progress | None = None,
     object_name: str | None = None,
     object_version: int | None = None,
+    select: str = "medoid",
+    validate: bool = False,
+    density: float | None = None,
+    repair_limit: int = 4,
+    sim_workers: int | None = None,
 ) -> GraspSet:
     """Grasps for one part and one gripper (see CONTRACT.md, Python API).
 
     `recording` is a path for a Rerun .rrd or a `rerun.RecordingStream` to log into. `progress(stage, fraction)`
     is called within and between stages; raising `graspgen.errors.Cancelled` from it stops the run.
+
+    Quality and validation (docs/QUALITY.md), all off by default: `select="best-near-medoid"` scores every
+    candidate (quality.py) and exports, per final cluster, the best-scoring member near the medoid, best first;
+    `validate=True` simulates every exported grasp in MuJoCo (physics.py; part `density` in kg/m^3) and replaces a
+    failing one by up to `repair_limit` members of its cluster, nearest first.
     """
     report = progress or _noop
+    extras = _Extras.make(select, validate, density, repair_limit, sim_workers)
     spec = gripper if isinstance(gripper, GripperSpec) else GripperSpec.from_dict(gripper)
     params = Params(
         points=points,
@@ -142,6 +155,8 @@ def generate(
         labels=np.full((int(keep.sum()), 2), -1, dtype=np.int32),
         medoids=np.zeros(0, dtype=np.int64),
     )
+    if extras.select != "medoid":
+        cands = _with_quality(cands, part, pts, nrm, spec, mu, params)
     rejected = {
         "stroke": pairs.rejected_stroke,
         "outside": pairs.rejected_outside,
@@ -168,7 +183,8 @@ def generate(
         "sha256": part.sha256,
         "source_units": part.source_units,
     }
-    result = _cluster_and_export(cands, obj, spec, params, mu, stats, report, t_all, list(part.warnings))
+    extras = extras.with_part(part)
+    result = _cluster_and_export(cands, obj, spec, params, mu, stats, report, t_all, list(part.warnings), extras)
     if recording is not None:
         from .recording import record_run
 
@@ -185,11 +201,23 @@ def recluster(
     seed: int = 0,
     recording: Any = None,
     progress: Progress | None = None,
+    select: str = "medoid",
+    validate: bool = False,
+    density: float | None = None,
+    repair_limit: int = 4,
+    sim_workers: int | None = None,
+    mesh: str | os.PathLike | trimesh.Trimesh | Part | None = None,
+    units: str | None = None,
 ) -> GraspSet:
-    """A new selection from stored candidates with other k1 / k2 / seed, without regenerating them."""
+    """A new selection from stored candidates with other k1 / k2 / seed, without regenerating them.
+
+    `select` and `validate` as in generate(); validation, and quality scoring of candidates stored without
+    quality terms, need the part: `mesh` (a Part, a mesh in metres, or a path with `units`).
+    """
     from .export import load_candidates
 
     report = progress or _noop
+    extras = _Extras.make(select, validate, density, repair_limit, sim_workers)
     t_all = time.perf_counter()
     cands = candidates if isinstance(candidates, Candidates) else load_candidates(candidates)
     spec = GripperSpec.from_dict(previous_export["gripper"])
@@ -199,10 +227,26 @@ def recluster(
     if len(cands.roll_angles_rad) != params.rolls:
         raise InvalidParameterError("the candidates' roll count differs from the export's params.rolls")
     prev = previous_export.get("stats", {})
-    stats = {k: v for k, v in prev.items() if k not in ("timings_s", "cluster_note")}
+    stats = {
+        k: v for k, v in prev.items() if k not in ("timings_s", "cluster_note", "coverage", "selection", "validation")
+    }
     stats["timings_s"] = {}
     stats["candidates"] = len(cands)
-    result = _cluster_and_export(cands, dict(previous_export["object"]), spec, params, mu, stats, report, t_all, [])
+    part = None
+    if mesh is not None:
+        part = mesh if isinstance(mesh, Part) else load_part(mesh, units=units or "m")
+    elif extras.validate or (extras.select != "medoid" and cands.quality_terms is None):
+        raise InvalidParameterError(
+            "validation, and quality selection of candidates stored without quality terms, need the part (mesh=)",
+            field="mesh",
+        )
+    if extras.select != "medoid" and cands.quality_terms is None:
+        pts_q, nrm_q = _surface_for_quality(part, params)
+        cands = _with_quality(cands, part, pts_q, nrm_q, spec, mu, params)
+    extras = extras.with_part(part)
+    result = _cluster_and_export(
+        cands, dict(previous_export["object"]), spec, params, mu, stats, report, t_all, [], extras
+    )
     if recording is not None:
         from .recording import record_run
 
@@ -210,7 +254,8 @@ def recluster(
     return result
 
 
-def _cluster_and_export(cands, obj, spec, params, mu, stats, report, t_all, warnings) -> GraspSet:
+def _cluster_and_export(cands, obj, spec, params, mu, stats, report, t_all, warnings, extras=None) -> GraspSet:
+    extras = extras or _Extras()
     report("cluster", 0.0)
     t0 = time.perf_counter()
     res = clustering.two_stage(cands.midpoints, cands.axes, params.k1, params.k2, seed=params.seed)
@@ -223,13 +268,44 @@ def _cluster_and_export(cands, obj, spec, params, mu, stats, report, t_all, warn
     medoids = np.asarray(res.medoids, dtype=np.int64)
     clusters = np.asarray(res.medoid_clusters, dtype=np.int64).reshape(-1, 2)
     sizes = np.asarray(res.cluster_sizes, dtype=np.int64)
-    # best first within each translation cluster: larger friction margin, then candidate index
-    order = np.lexsort((medoids, -cands.friction_margin_deg[medoids], clusters[:, 0])) if len(medoids) else medoids
-    medoids, clusters, sizes = medoids[order], clusters[order], sizes[order]
-    cands = Candidates(
-        **{**cands.__dict__, "labels": np.asarray(res.labels, dtype=np.int32).reshape(-1, 2), "medoids": medoids}
-    )
+    labels = np.asarray(res.labels, dtype=np.int32).reshape(-1, 2)
+    medoid_of = medoids.copy()
+    score = None
+    if extras.select != "medoid":
+        score = quality.scores(cands.quality_terms)
+        medoids = quality.select_best_near_medoid(labels, medoids, clusters, score, cands.midpoints, cands.axes)
+        stats["selection"] = {
+            "mode": extras.select,
+            "replaced": int(np.sum(medoids != medoid_of)),
+            "mean_score_medoids": _mean(score[medoid_of]),
+            "mean_score_selected": _mean(score[medoids]),
+            "weights": quality.WEIGHTS.to_dict(),
+            "near": {"radius": quality.NEAR.radius, "angle_deg": quality.NEAR.angle_deg},
+        }
+    sim = None
+    if extras.validate:
+        t0 = time.perf_counter()
+        medoids, sim = _validate(cands, labels, medoids, clusters, spec, mu, params, extras, stats, report)
+        stats["timings_s"]["validate"] = time.perf_counter() - t0
+    # best first within each translation cluster: (validated grasps first,) larger score or friction margin, then
+    # candidate index
+    key = cands.friction_margin_deg[medoids] if score is None else score[medoids]
+    keys = [medoids, -key]
+    if sim is not None:
+        keys.append(np.array([not r.success for r in sim], dtype=bool))
+    order = np.lexsort((*keys, clusters[:, 0])) if len(medoids) else medoids
+    medoids, clusters, sizes, medoid_of = medoids[order], clusters[order], sizes[order], medoid_of[order]
+    cands = Candidates(**{**cands.__dict__, "labels": labels, "medoids": medoids})
     grasps = _grasps(cands, medoids, clusters, sizes)
+    for r, g in enumerate(grasps):
+        m = int(medoids[r])
+        if score is not None:
+            g["quality"] = quality.describe(cands.quality_terms[m], score[m])
+        if m != medoid_of[r]:
+            g["medoid"] = int(medoid_of[r])  # the cluster's medoid this grasp stands in for
+        if sim is not None:
+            g["sim"] = sim[order[r]].to_json()
+    stats["coverage"] = coverage(cands.midpoints, cands.axes, medoids).to_json()
     stats["timings_s"]["total"] = time.perf_counter() - t_all
     report("export", 1.0)
     return GraspSet(
@@ -357,3 +433,147 @@ def _empty_reason(rejected, total, spec: GripperSpec, params: Params, mu: float,
     if narrowest is not None:
         out["narrowest_antipodal_width"] = narrowest
     return out
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# quality-aware selection and physics validation (docs/QUALITY.md)
+
+
+@dataclass(frozen=True)
+class _Extras:
+    """The options beyond the paper's method; the defaults leave the export as the paper's method makes it."""
+
+    select: str = "medoid"
+    validate: bool = False
+    density: float | None = None
+    repair_limit: int = 4
+    sim_workers: int | None = None
+    part: Part | None = None
+
+    @classmethod
+    def make(cls, select, validate, density, repair_limit, sim_workers) -> _Extras:
+        if select not in quality.SELECT_MODES:
+            raise InvalidParameterError(
+                f"select must be one of {', '.join(quality.SELECT_MODES)}, got {select!r}", field="select"
+            )
+        if not isinstance(validate, bool):
+            raise InvalidParameterError(f"validate must be true or false, got {validate!r}", field="validate")
+        if density is not None and (
+            isinstance(density, bool)
+            or not isinstance(density, (int, float))
+            or not math.isfinite(density)
+            or not 1.0 <= density <= 100_000.0
+        ):
+            raise InvalidParameterError(
+                f"density must be between 1 and 100000 kg/m^3, got {density!r}", field="density"
+            )
+        if isinstance(repair_limit, bool) or not isinstance(repair_limit, int) or not 0 <= repair_limit <= 64:
+            raise InvalidParameterError(
+                f"repair_limit must be an integer 0..64, got {repair_limit!r}", field="repair_limit"
+            )
+        if sim_workers is not None and (
+            isinstance(sim_workers, bool) or not isinstance(sim_workers, int) or sim_workers < 1
+        ):
+            raise InvalidParameterError(
+                f"sim_workers must be a positive integer, got {sim_workers!r}", field="sim_workers"
+            )
+        return cls(select, validate, None if density is None else float(density), repair_limit, sim_workers)
+
+    def with_part(self, part: Part | None) -> _Extras:
+        return replace(self, part=part)
+
+
+def _mean(values: np.ndarray) -> float | None:
+    return round(float(np.mean(values)), 6) if len(values) else None
+
+
+def _surface_for_quality(part: Part, params: Params) -> tuple[np.ndarray, np.ndarray]:
+    sample = sampling.sample_surface(part, params.points, seed=params.seed)
+    return sample.points, sample.normals
+
+
+def _with_quality(cands: Candidates, part: Part, pts, nrm, spec: GripperSpec, mu: float, params: Params) -> Candidates:
+    """The candidates with their quality terms (quality.py) and the part's centre of mass."""
+    com = quality.center_of_mass(part.mesh, part.points)
+    terms = quality.quality_terms(
+        cands.contacts,
+        cands.normals,
+        cands.friction_margin_deg,
+        half_angle_deg=quality.half_angle_deg(mu, params.safety_factor),
+        center_of_mass=com,
+        length_scale=0.5 * float(np.linalg.norm(part.extents)),
+        surface_points=pts,
+        surface_normals=nrm,
+        patch_radius=min(spec.finger_width, spec.finger_depth) / 2,
+    )
+    return Candidates(**{**cands.__dict__, "quality_terms": terms, "center_of_mass": com})
+
+
+def _poses(cands: Candidates, idx: np.ndarray) -> np.ndarray:
+    """The export's pose (T_object_grasp, (m, 4, 4)) of candidates `idx`, at the roll choose_roll picks."""
+    rolls = np.array([choose_roll(cands.free_rolls[m]) for m in idx], dtype=np.int64)
+    return grasp_frames(cands.midpoints[idx], cands.axes[idx], cands.roll_angles_rad[rolls])
+
+
+def _validate(cands, labels, selected, clusters, spec, mu, params, extras: _Extras, stats, report):
+    """Simulate the selected grasps; replace each failing one by the first of up to `repair_limit` members of its
+    final cluster (nearest to it first) that succeeds. Returns the new selection and its SimResults."""
+    from . import physics
+
+    report("validate", 0.0)
+    part = extras.part
+    if part.mesh is not None:
+        mesh, note = part.mesh, None
+    else:
+        mesh = trimesh.convex.convex_hull(np.asarray(part.points))
+        note = "a point cloud has no surface to simulate: simulated as the convex hull of its points"
+    density = extras.density or physics.DEFAULT_DENSITY
+    sim_part = physics.prepare_part(mesh, spec, friction=mu, density=density, seed=params.seed)
+    report("validate", 0.1)
+    widths = cands.widths
+    run = lambda idx: physics.simulate_grasps(  # noqa: E731
+        sim_part, _poses(cands, idx), widths[idx], seed=params.seed, keys=idx, workers=extras.sim_workers
+    )
+    results = run(selected)
+    first = list(results)
+    simulated = len(selected)
+    final = selected.copy()
+    alternatives = {}
+    mids, axes = cands.midpoints, cands.axes
+    for r, res in enumerate(results):
+        if res.success or extras.repair_limit == 0:
+            continue
+        t, k = clusters[r]
+        members = np.flatnonzero((labels[:, 0] == t) & (labels[:, 1] == k))
+        members = members[members != selected[r]]
+        ordered, _ = quality.members_by_distance(members, int(selected[r]), mids, axes)
+        alternatives[r] = ordered[: extras.repair_limit]
+    for j in range(extras.repair_limit):
+        rows = [r for r, alts in alternatives.items() if not results[r].success and j < len(alts)]
+        if not rows:
+            break
+        idx = np.array([alternatives[r][j] for r in rows], dtype=np.int64)
+        simulated += len(idx)
+        for r, m, res in zip(rows, idx, run(idx), strict=True):
+            if res.success:
+                final[r], results[r] = m, res
+        report("validate", 0.1 + 0.9 * (j + 1) / extras.repair_limit)
+    report("validate", 1.0)
+    import mujoco
+
+    part_info = sim_part.describe()
+    notes = [n for n in (note, sim_part.note) if n]
+    if notes:
+        part_info["note"] = "; ".join(notes)
+        stats.setdefault("warnings", []).extend(f"validation: {n}" for n in notes)
+    stats["validation"] = {
+        **physics.summarise(results),
+        "first_pass": physics.summarise(first),
+        "repaired": int(np.sum(final != selected)),
+        "repair_limit": extras.repair_limit,
+        "simulated": simulated,
+        "density": density,
+        "part": part_info,
+        "engine": f"mujoco {mujoco.__version__}",
+    }
+    return final, results

@@ -1,0 +1,512 @@
+"""Physics validation of grasps in MuJoCo: close the gripper on the part, lift it against gravity, shake it.
+
+The simulation runs in the gripper's frame, which is the grasp frame of the contract (origin at the contact
+midpoint, +X the closing axis, +Z the approach direction, palm at -Z). The gripper stays put; the part is a free body
+placed at `inv(T_object_grasp)`. Lifting and shaking the gripper with an acceleration `a(t)` is, in the gripper's
+frame, the same as loading the part with the fictitious force `-m a(t)` (translations only, so there are no
+rotational fictitious forces); together with gravity the part feels `m (g - a(t))` at its centre of mass. That keeps
+one static MuJoCo model per part and gripper, with exact contact kinematics, and lets every grasp run on its own
+`MjData` in a thread of its own (mj_step releases the GIL).
+
+Gravity acts along the grasp frame's +Z: the gripper came down along +Z onto the part and lifts it along -Z, the
+usual top-down pick. Each grasp goes through
+
+1. approach: the open gripper (pre-grasp width) comes in along +Z from clear of the part; any penetration deeper
+   than `approach_tolerance` on the way or at the pose -> `collision`;
+2. close: both fingers pushed with `grip_force` (coupled like a real parallel gripper); either finger without a
+   contact afterwards -> `no_contact`;
+3. lift: the load ramps up to gravity plus the lift acceleration, then holds;
+4. shake: one sine period of acceleration along each of `shake_directions`;
+
+losing either finger's contact (or the part moving more than `drop_distance`) -> `dropped`; the contact midpoint
+moving more than `slip_limit` or the part turning more than `rotation_limit_deg` relative to the fingers ->
+`slipped`; otherwise a success. Every constant is a field of `SimConstants`.
+
+Collision geometry of the part: a convex decomposition (CoACD), or the part itself when it is convex; if the
+decomposition is unavailable or fails, the convex hull, and `SimPart.note` says so. Mass and inertia come from the
+mesh volume (trimesh's mass properties) and a density.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+import trimesh
+
+from .errors import InvalidParameterError
+from .gripper import GripperSpec
+
+__all__ = [
+    "SimConstants",
+    "SIM",
+    "DEFAULT_DENSITY",
+    "REASONS",
+    "SimPart",
+    "SimResult",
+    "prepare_part",
+    "simulate_grasp",
+    "simulate_grasps",
+    "summarise",
+]
+
+#: kg/m^3; steel, the common case for machined parts and the heavier (stricter) one
+DEFAULT_DENSITY = 7850.0
+
+#: failure reasons, in the order the stages can produce them
+REASONS = ("collision", "no_contact", "dropped", "slipped")
+
+
+@dataclass(frozen=True)
+class SimConstants:
+    """Every constant of the simulation in one place (SI units: m, s, kg, N)."""
+
+    #: integration step; 1 ms keeps the stiff pad contacts of gram-scale parts stable
+    timestep: float = 1.0e-3
+    #: force of each finger on the part while closed (N); a small servo-electric gripper's lower setting
+    grip_force: float = 20.0
+    #: mass of each finger (kg)
+    finger_mass: float = 0.05
+    #: viscous damping of the finger joints (N s/m): closing speed grip_force / finger_damping = 0.2 m/s
+    finger_damping: float = 100.0
+    #: standard gravity (m/s^2), along the grasp frame's +Z
+    gravity: float = 9.81
+    #: time to close the fingers and let the part settle (s)
+    close_time: float = 0.25
+    #: the lift's acceleration on top of gravity (m/s^2) and the time over which the load ramps up (s)
+    lift_acceleration: float = 3.0
+    lift_time: float = 0.2
+    #: time holding the part at rest after the lift (s)
+    hold_time: float = 0.2
+    #: shaking: peak acceleration (m/s^2) and frequency (Hz) of one sine period per direction
+    shake_acceleration: float = 5.0
+    shake_frequency: float = 4.0
+    #: shake directions in the grasp frame: along the closing axis, across it, along the approach, and a diagonal
+    shake_directions: tuple[tuple[float, float, float], ...] = (
+        (1.0, 0.0, 0.0),
+        (0.0, 1.0, 0.0),
+        (0.0, 0.0, 1.0),
+        (0.0, 0.7071067811865476, -0.7071067811865476),
+    )
+    #: Coulomb friction pad/part is the gripper's (or the job's) coefficient; torsional friction models a pad
+    #: patch of this radius (m): MuJoCo's torsional coefficient is friction * radius
+    patch_radius: float = 2.0e-3
+    #: contact softness (MuJoCo solref time constant, s, and damping ratio)
+    solref: tuple[float, float] = (0.004, 1.0)
+    #: approach: step of the sweep (m) and the penetration forgiven (m): the decomposition is a little larger
+    #: than the part, and the candidates' own collision check has already been exact on the sampled surface
+    approach_step: float = 1.0e-3
+    approach_tolerance: float = 1.0e-3
+    #: outcome thresholds: contact midpoint displacement (m), rotation (deg), displacement that means dropped (m)
+    slip_limit: float = 5.0e-3
+    rotation_limit_deg: float = 10.0
+    drop_distance: float = 0.02
+    #: either finger out of contact for longer than this (s) after closing -> dropped
+    lost_contact_time: float = 0.02
+    #: the outcome is checked (and the load updated) every this many steps
+    check_steps: int = 5
+    #: seeded placement error of the part at the start (m, deg), as a real robot's pose error
+    pose_noise: float = 2.0e-4
+    pose_noise_deg: float = 0.2
+    #: convex decomposition (CoACD): concavity threshold, hull limit and a fast search
+    coacd_threshold: float = 0.08
+    coacd_max_hulls: int = 24
+    coacd_options: tuple[tuple[str, int], ...] = (
+        ("mcts_iterations", 40),
+        ("mcts_nodes", 10),
+        ("mcts_max_depth", 2),
+        ("resolution", 1000),
+        ("preprocess_resolution", 30),
+    )
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+SIM = SimConstants()
+
+
+@dataclass(frozen=True)
+class SimResult:
+    """The outcome of one simulated grasp."""
+
+    success: bool
+    reason: str | None  # None on success, else one of REASONS
+    slip_mm: float  # largest displacement of the contact midpoint relative to the fingers after closing
+    rotation_deg: float  # largest rotation of the part relative to the fingers after closing
+    contacts: int  # part-finger contacts at the end of the closing stage
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "success": self.success,
+            "reason": self.reason,
+            "slip_mm": round(self.slip_mm, 4),
+            "rotation_deg": round(self.rotation_deg, 4),
+        }
+
+
+@dataclass
+class SimPart:
+    """One MuJoCo model of a part and a gripper, shared read-only by every simulated grasp."""
+
+    model: Any  # mujoco.MjModel
+    spec: GripperSpec
+    friction: float
+    mass: float
+    center_of_mass: np.ndarray  # (3,) object frame
+    geometry: str  # "convex" | "coacd" | "convex-hull"
+    pieces: int
+    note: str | None
+    vertices: np.ndarray  # (v, 3) the part's vertices, object frame (for the approach distance)
+    constants: SimConstants = field(default_factory=SimConstants)
+
+    def describe(self) -> dict[str, Any]:
+        out = {
+            "geometry": self.geometry,
+            "pieces": self.pieces,
+            "mass_kg": round(self.mass, 9),
+            "grip_force_n": self.constants.grip_force,
+        }
+        if self.note:
+            out["note"] = self.note
+        return out
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# model
+
+
+def _decompose(mesh: trimesh.Trimesh, c: SimConstants, seed: int) -> tuple[list[trimesh.Trimesh], str, str | None]:
+    """Convex pieces of the part, the method used and a note when it fell back."""
+    if mesh.is_convex:
+        return [mesh.convex_hull], "convex", None
+    try:
+        import coacd
+    except ImportError:
+        return [mesh.convex_hull], "convex-hull", "coacd is not installed: the part is simulated as its convex hull"
+    try:
+        coacd.set_log_level("error")
+        parts = coacd.run_coacd(
+            coacd.Mesh(np.asarray(mesh.vertices), np.asarray(mesh.faces)),
+            threshold=c.coacd_threshold,
+            max_convex_hull=c.coacd_max_hulls,
+            seed=int(seed),
+            **dict(c.coacd_options),
+        )
+    except Exception as exc:  # the decomposition is a best effort: fall back and say so
+        return [mesh.convex_hull], "convex-hull", f"convex decomposition failed ({exc}): simulated as the convex hull"
+    pieces = []
+    for v, f in parts:
+        try:
+            hull = trimesh.Trimesh(np.asarray(v, dtype=np.float64), np.asarray(f)).convex_hull
+        except Exception:  # a degenerate piece (flat or a few points) adds nothing to the contact geometry
+            continue
+        if hull.volume > 1e-12 and len(hull.vertices) >= 4:
+            pieces.append(hull)
+    if not pieces:
+        return [mesh.convex_hull], "convex-hull", "convex decomposition gave no pieces: simulated as the convex hull"
+    return pieces, "coacd", None
+
+
+def _mass_properties(mesh: trimesh.Trimesh, density: float) -> tuple[float, np.ndarray, np.ndarray, str | None]:
+    """Mass (kg), centre of mass (3,) and inertia about the centre of mass (3, 3) from the mesh volume."""
+    note = None
+    body = mesh
+    if not (mesh.is_watertight and mesh.volume > 0):
+        body = mesh.convex_hull
+        note = "the mesh is not a closed volume: mass and inertia from its convex hull"
+    props = body.mass_properties
+    volume = float(props["volume"])
+    com = np.asarray(props["center_mass"], dtype=np.float64)
+    inertia = np.asarray(props["inertia"], dtype=np.float64) * density  # trimesh's is for unit density
+    return volume * density, com, inertia, note
+
+
+def _fmt(values) -> str:
+    return " ".join(f"{float(v):.9g}" for v in np.asarray(values).ravel())
+
+
+def _xml(pieces, spec: GripperSpec, friction: float, mass: float, com, inertia, c: SimConstants) -> str:
+    t, fw, fd = spec.finger_thickness, spec.finger_width, spec.finger_depth
+    half_stroke = spec.stroke / 2
+    torsion = friction * c.patch_radius
+    fric = f"{friction:.9g} {torsion:.9g} 0.0001"
+    solref = _fmt(c.solref)
+    assets = "\n".join(
+        f'<mesh name="piece{k}" vertex="{_fmt(p.vertices)}" face="{_fmt(p.faces.astype(int))}"/>'
+        for k, p in enumerate(pieces)
+    )
+    part_geoms = "\n".join(
+        f'<geom type="mesh" mesh="piece{k}" contype="2" conaffinity="1" condim="4" friction="{fric}" '
+        f'solref="{solref}" mass="0"/>'
+        for k in range(len(pieces))
+    )
+    # inner faces at x = -+stroke/2 when the joints are at 0 (fully open); a joint value q closes each finger by q
+    finger = (
+        f'<geom type="box" size="{t / 2:.9g} {fw / 2:.9g} {fd / 2:.9g}" contype="1" conaffinity="2" condim="4" '
+        f'friction="{fric}" solref="{solref}"/>'
+    )
+    palm = ""
+    box = spec.palm_box()
+    if box is not None:
+        palm = (
+            f'<geom name="palm" type="box" pos="{_fmt(box.center)}" size="{_fmt(np.asarray(box.extents) / 2)}" '
+            f'contype="1" conaffinity="2" condim="4" friction="{fric}" solref="{solref}"/>'
+        )
+    close_range = max(half_stroke - spec.min_width / 2, 0.0)
+    I = inertia
+    full = _fmt([I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]])
+    fm = c.finger_mass
+    return f"""
+<mujoco model="graspgen-validation">
+  <compiler angle="radian" autolimits="true" boundmass="1e-9" boundinertia="1e-15"/>
+  <option timestep="{c.timestep:.9g}" gravity="0 0 0" integrator="implicitfast" cone="elliptic" impratio="10"/>
+  <asset>
+{assets}
+  </asset>
+  <worldbody>
+    {palm}
+    <body name="finger0" pos="{-(half_stroke + t / 2):.9g} 0 0">
+      <joint name="close0" type="slide" axis="1 0 0" range="0 {close_range:.9g}" damping="{c.finger_damping:.9g}"/>
+      <inertial pos="0 0 0" mass="{fm:.9g}" diaginertia="1e-5 1e-5 1e-5"/>
+      {finger}
+    </body>
+    <body name="finger1" pos="{half_stroke + t / 2:.9g} 0 0">
+      <joint name="close1" type="slide" axis="-1 0 0" range="0 {close_range:.9g}" damping="{c.finger_damping:.9g}"/>
+      <inertial pos="0 0 0" mass="{fm:.9g}" diaginertia="1e-5 1e-5 1e-5"/>
+      {finger}
+    </body>
+    <body name="part">
+      <freejoint name="part"/>
+      <inertial pos="{_fmt(com)}" mass="{mass:.9g}" fullinertia="{full}"/>
+{part_geoms}
+    </body>
+  </worldbody>
+  <equality>
+    <joint joint1="close1" joint2="close0" polycoef="0 1 0 0 0"/>
+  </equality>
+  <actuator>
+    <motor name="grip0" joint="close0" ctrlrange="0 {c.grip_force:.9g}"/>
+    <motor name="grip1" joint="close1" ctrlrange="0 {c.grip_force:.9g}"/>
+  </actuator>
+</mujoco>
+"""
+
+
+def prepare_part(
+    mesh: trimesh.Trimesh,
+    spec: GripperSpec,
+    *,
+    friction: float | None = None,
+    density: float = DEFAULT_DENSITY,
+    seed: int = 0,
+    constants: SimConstants = SIM,
+) -> SimPart:
+    """Build the MuJoCo model of `mesh` (metres, object frame) held by `spec`'s gripper; once per part."""
+    import mujoco
+
+    if not (isinstance(density, (int, float)) and math.isfinite(density) and density > 0):
+        raise InvalidParameterError(f"density must be a positive number (kg/m^3), got {density!r}", field="density")
+    mu = spec.friction if friction is None else float(friction)
+    mass, com, inertia, mass_note = _mass_properties(mesh, float(density))
+    pieces, geometry, note = _decompose(mesh, constants, seed)
+    notes = [n for n in (note, mass_note) if n]
+    model = mujoco.MjModel.from_xml_string(_xml(pieces, spec, mu, mass, com, inertia, constants))
+    return SimPart(
+        model=model,
+        spec=spec,
+        friction=mu,
+        mass=mass,
+        center_of_mass=com,
+        geometry=geometry,
+        pieces=len(pieces),
+        note="; ".join(notes) or None,
+        vertices=np.asarray(mesh.vertices, dtype=np.float64),
+        constants=constants,
+    )
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# one grasp
+
+
+def _matrix_to_quat_wxyz(R: np.ndarray) -> np.ndarray:
+    import mujoco
+
+    q = np.zeros(4)
+    mujoco.mju_mat2Quat(q, np.ascontiguousarray(R, dtype=np.float64).ravel())
+    return q
+
+
+def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    return trimesh.transformations.rotation_matrix(angle, axis)[:3, :3]
+
+
+class _Grasp:
+    """The state of one simulated grasp on its own MjData."""
+
+    def __init__(self, sim: SimPart, T_object_grasp: np.ndarray, width: float, rng: np.random.Generator) -> None:
+        import mujoco
+
+        self.mj = mujoco
+        self.sim = sim
+        self.c = sim.constants
+        m = sim.model
+        self.m = m
+        self.d = mujoco.MjData(m)
+        self.part_body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "part")
+        self.finger_bodies = (
+            mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "finger0"),
+            mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "finger1"),
+        )
+        self.palm_geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "palm")
+        T = np.asarray(T_object_grasp, dtype=np.float64)
+        # T_grasp_object, with a small seeded placement error
+        T_go = np.linalg.inv(T)
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        R_err = _rotation(axis, math.radians(self.c.pose_noise_deg) * rng.uniform(-1.0, 1.0))
+        t_err = rng.uniform(-1.0, 1.0, size=3) * self.c.pose_noise
+        self.R0 = R_err @ T_go[:3, :3]
+        self.p0 = R_err @ T_go[:3, 3] + t_err
+        self.midpoint_object = T[:3, 3].copy()  # the contact midpoint in the object frame
+        spec = sim.spec
+        open_width = spec.open_width(width)
+        self.q_open = max((spec.stroke - open_width) / 2, 0.0)
+        # the approach starts where the fingers' leading edge (z = +finger_depth / 2) is below the part's lowest point
+        z = (sim.vertices @ self.R0.T + self.p0)[:, 2]
+        self.approach_distance = max(spec.finger_depth / 2 - float(z.min()) + self.c.approach_step, 0.0)
+
+    # -- helpers ---------------------------------------------------------------------------------------------------
+    def _set_part(self, p: np.ndarray) -> None:
+        adr = self.m.jnt_qposadr[self.m.body_jntadr[self.part_body]]
+        self.d.qpos[adr : adr + 3] = p
+        self.d.qpos[adr + 3 : adr + 7] = _matrix_to_quat_wxyz(self.R0)
+
+    def _part_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.d.xpos[self.part_body].copy(), self.d.xmat[self.part_body].reshape(3, 3).copy()
+
+    def _contacts(self) -> tuple[int, int, float]:
+        """Contacts of the part with finger 0, finger 1, and the deepest penetration (m, >= 0)."""
+        n = self.d.ncon
+        if n == 0:
+            return 0, 0, 0.0
+        con = self.d.contact
+        b1 = self.m.geom_bodyid[con.geom1[:n]]
+        b2 = self.m.geom_bodyid[con.geom2[:n]]
+        mine = (b1 == self.part_body) | (b2 == self.part_body)
+        if not mine.any():
+            return 0, 0, 0.0
+        other = np.where(b1 == self.part_body, b2, b1)[mine]
+        deepest = max(0.0, -float(np.min(con.dist[:n][mine])))
+        return int(np.sum(other == self.finger_bodies[0])), int(np.sum(other == self.finger_bodies[1])), deepest
+
+    # -- stages ----------------------------------------------------------------------------------------------------
+    def approach_collides(self) -> bool:
+        mj, d = self.mj, self.d
+        d.qpos[:] = 0.0
+        for j in ("close0", "close1"):
+            d.qpos[self.m.jnt_qposadr[mj.mj_name2id(self.m, mj.mjtObj.mjOBJ_JOINT, j)]] = self.q_open
+        steps = int(math.ceil(self.approach_distance / self.c.approach_step))
+        # the gripper moving along +Z onto the part is the part moving along -Z onto the gripper
+        for k in range(steps, -1, -1):
+            self._set_part(self.p0 + np.array([0.0, 0.0, k * self.c.approach_step]))
+            mj.mj_kinematics(self.m, d)
+            mj.mj_collision(self.m, d)
+            if self._contacts()[2] > self.c.approach_tolerance:
+                return True
+        return False
+
+    def run(self) -> SimResult:
+        mj, m, d, c = self.mj, self.m, self.d, self.c
+        if self.approach_collides():
+            return SimResult(False, "collision", 0.0, 0.0, 0)
+        d.qvel[:] = 0.0
+        mj.mj_forward(m, d)
+        d.ctrl[:] = c.grip_force
+        mj.mj_step(m, d, nstep=max(1, int(round(c.close_time / c.timestep))))
+        n0, n1, _ = self._contacts()
+        if n0 == 0 or n1 == 0:
+            return SimResult(False, "no_contact", 0.0, 0.0, n0 + n1)
+        contacts = n0 + n1
+        p_ref, R_ref = self._part_pose()
+        mid_ref = R_ref @ self.midpoint_object + p_ref
+        slip = rot = lost = 0.0
+        dt = c.timestep * c.check_steps
+        for a in self._loads(dt):
+            # the load is constant over one check interval (a few ms, short against the shake period)
+            d.xfrc_applied[self.part_body, :3] = self.sim.mass * a
+            mj.mj_step(m, d, nstep=c.check_steps)
+            p, R = self._part_pose()
+            slip = max(slip, float(np.linalg.norm(R @ self.midpoint_object + p - mid_ref)))
+            cos = (np.trace(R_ref.T @ R) - 1.0) / 2.0
+            rot = max(rot, math.degrees(math.acos(min(1.0, max(-1.0, cos)))))
+            n0, n1, _ = self._contacts()
+            lost = lost + dt if (n0 == 0 or n1 == 0) else 0.0
+            if slip > c.drop_distance or lost > c.lost_contact_time:
+                return SimResult(False, "dropped", slip * 1e3, rot, contacts)
+        if slip > c.slip_limit or rot > c.rotation_limit_deg:
+            return SimResult(False, "slipped", slip * 1e3, rot, contacts)
+        return SimResult(True, None, slip * 1e3, rot, contacts)
+
+    def _loads(self, dt: float):
+        """Acceleration felt by the part (gravity minus the gripper's acceleration), grasp frame, per interval."""
+        c = self.c
+        g = np.array([0.0, 0.0, c.gravity])
+        n_ramp = max(1, int(round(c.lift_time / dt)))
+        for k in range(n_ramp):  # lifting along -Z with a growing acceleration loads the part along +Z
+            yield g + np.array([0.0, 0.0, c.lift_acceleration]) * (k + 1) / n_ramp
+        for _ in range(int(round(c.hold_time / dt))):
+            yield g
+        n_shake = max(1, int(round(1.0 / c.shake_frequency / dt)))
+        for v in c.shake_directions:
+            u = np.asarray(v, dtype=np.float64) / np.linalg.norm(v)
+            for k in range(n_shake):
+                yield g - u * (c.shake_acceleration * math.sin(2 * math.pi * (k + 0.5) / n_shake))
+
+
+def simulate_grasp(sim: SimPart, T_object_grasp: np.ndarray, width: float, *, seed: int = 0, key: int = 0) -> SimResult:
+    """Simulate one grasp (pose (4, 4) in the object frame, contact distance `width` m). `key` (e.g. the candidate
+    index) and `seed` pick the placement error, so a grasp's outcome does not depend on what else runs."""
+    rng = np.random.default_rng([int(seed), int(key)])
+    return _Grasp(sim, T_object_grasp, float(width), rng).run()
+
+
+def simulate_grasps(
+    sim: SimPart,
+    poses: np.ndarray,
+    widths: np.ndarray,
+    *,
+    seed: int = 0,
+    keys: np.ndarray | None = None,
+    workers: int | None = None,
+) -> list[SimResult]:
+    """Simulate grasps (poses (n, 4, 4), widths (n,)) in parallel threads; results in input order."""
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+    widths = np.asarray(widths, dtype=np.float64).reshape(-1)
+    keys = np.arange(len(poses)) if keys is None else np.asarray(keys).reshape(-1)
+    n = len(poses)
+    if n == 0:
+        return []
+    workers = min(n, workers or os.cpu_count() or 1)
+    if workers <= 1:
+        return [simulate_grasp(sim, poses[i], widths[i], seed=seed, key=int(keys[i])) for i in range(n)]
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="graspgen-sim") as pool:
+        return list(pool.map(lambda i: simulate_grasp(sim, poses[i], widths[i], seed=seed, key=int(keys[i])), range(n)))
+
+
+def summarise(results: list[SimResult]) -> dict[str, Any]:
+    """Counts for stats: tested, succeeded, success rate, failures by reason, mean slip of the successes."""
+    n = len(results)
+    ok = [r for r in results if r.success]
+    return {
+        "tested": n,
+        "succeeded": len(ok),
+        "success_rate": round(len(ok) / n, 6) if n else None,
+        "failures": {reason: sum(r.reason == reason for r in results) for reason in REASONS},
+        "mean_slip_mm": round(float(np.mean([r.slip_mm for r in ok])), 4) if ok else None,
+    }

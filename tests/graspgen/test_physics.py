@@ -1,0 +1,167 @@
+"""MuJoCo validation on analytic parts whose outcome is known, determinism, repair, and the wiring in generate()."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+import graspgen
+from graspgen import physics
+from graspgen.gripper import GripperSpec
+from graspgen.transforms import grasp_frames
+
+GRIPPER = {
+    "name": "pgn-80",
+    "stroke": 0.08,
+    "finger_width": 0.02,
+    "finger_depth": 0.03,
+    "finger_thickness": 0.01,
+    "friction": 0.5,
+    "pregrasp_clearance": 0.02,
+    "palm_depth": 0.02,
+}
+SPEC = GripperSpec.from_dict(GRIPPER)
+
+
+def _pose(mid, axis, roll_rad=np.pi) -> np.ndarray:
+    return grasp_frames(np.array([mid], float), np.array([axis], float), np.array([roll_rad]))[0]
+
+
+@pytest.fixture(scope="module")
+def box_sim():
+    return physics.prepare_part(trimesh.creation.box(extents=(0.04, 0.03, 0.02)), SPEC)
+
+
+def test_box_model(box_sim):
+    assert box_sim.geometry == "convex" and box_sim.pieces == 1 and box_sim.note is None
+    assert box_sim.mass == pytest.approx(0.04 * 0.03 * 0.02 * physics.DEFAULT_DENSITY)
+    assert np.allclose(box_sim.center_of_mass, 0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("axis", [(1, 0, 0), (0, 1, 0)])
+def test_centred_grasp_across_a_box_succeeds(box_sim, axis):
+    width = 0.04 if axis[0] else 0.03
+    r = physics.simulate_grasp(box_sim, _pose([0, 0, 0], axis), width)
+    assert r.success and r.reason is None
+    assert r.contacts >= 2
+    assert 0.0 <= r.slip_mm < physics.SIM.slip_limit * 1e3
+    assert r.rotation_deg < physics.SIM.rotation_limit_deg
+
+
+def test_closing_axis_missing_the_part_reports_no_contact(box_sim):
+    # 60 mm beside the box, the fingers close on air
+    r = physics.simulate_grasp(box_sim, _pose([0, 0.06, 0], [1, 0, 0]), 0.04)
+    assert not r.success and r.reason == "no_contact" and r.contacts == 0
+
+
+def test_fingers_starting_inside_the_part_report_a_collision(box_sim):
+    # claimed width 5 mm across a 40 mm box: the open fingers (25 mm) start inside the part
+    r = physics.simulate_grasp(box_sim, _pose([0, 0, 0], [1, 0, 0]), 0.005)
+    assert not r.success and r.reason == "collision"
+
+
+def test_palm_hitting_the_part_on_the_way_in_is_a_collision():
+    # a grasp across the 20 mm height of a 60 mm plate, approaching from the plate's middle: the palm (and the
+    # fingers) would have to pass through the plate
+    plate = trimesh.creation.box(extents=(0.06, 0.06, 0.02))
+    sim = physics.prepare_part(plate, SPEC)
+    T = _pose([0, 0, 0], [0, 0, 1], roll_rad=0.0)
+    assert abs(T[2, 2]) < 1e-9  # approach along the plate
+    r = physics.simulate_grasp(sim, T, 0.02)
+    assert r.reason == "collision"
+
+
+def test_low_friction_heavy_part_is_not_held():
+    heavy = trimesh.creation.box(extents=(0.04, 0.04, 0.025))  # 0.31 kg of steel, low enough for the palm
+    sim = physics.prepare_part(heavy, SPEC, friction=0.05)  # 2 x 0.05 x 20 N = 2 N < 3.1 N weight
+    r = physics.simulate_grasp(sim, _pose([0, 0, 0], [1, 0, 0]), 0.04)
+    assert not r.success and r.reason in ("dropped", "slipped")
+    assert r.slip_mm > physics.SIM.slip_limit * 1e3
+
+
+def test_deterministic_for_a_seed_and_independent_of_threads(box_sim):
+    poses = np.stack([_pose([x, 0, 0], [0, 1, 0]) for x in (-0.01, 0.0, 0.01, 0.015)])
+    widths = np.full(4, 0.03)
+    a = physics.simulate_grasps(box_sim, poses, widths, seed=7, workers=1)
+    b = physics.simulate_grasps(box_sim, poses, widths, seed=7, workers=2)
+    assert a == b
+    c = physics.simulate_grasps(box_sim, poses, widths, seed=8, workers=2)
+    assert [r.success for r in c] == [r.success for r in a]
+    assert [r.slip_mm for r in c] != [r.slip_mm for r in a]  # the seed moves the placement error
+
+
+def test_bad_density_is_refused():
+    with pytest.raises(graspgen.InvalidParameterError, match="density"):
+        physics.prepare_part(trimesh.creation.box(extents=(0.02, 0.02, 0.02)), SPEC, density=-1.0)
+
+
+@pytest.mark.slow
+def test_convex_decomposition_keeps_the_hole_that_the_hull_fills(monkeypatch):
+    """A slim finger reaching into a ring's bore: free with CoACD, a collision with the convex hull."""
+    ring = trimesh.creation.annulus(r_min=0.010, r_max=0.030, height=0.020, sections=64)
+    slim = GripperSpec.from_dict(
+        {**GRIPPER, "finger_width": 0.008, "finger_thickness": 0.004, "palm_depth": 0.0, "pregrasp_clearance": 0.004}
+    )
+    T = _pose([0.02, 0, 0], [1, 0, 0], roll_rad=0.0)  # across the wall, approaching along the ring's axis
+    sim = physics.prepare_part(ring, slim)
+    assert sim.geometry == "coacd" and sim.pieces > 1
+    assert physics.simulate_grasp(sim, T, 0.02).success
+    monkeypatch.setattr(physics, "_decompose", lambda mesh, c, seed: ([mesh.convex_hull], "convex-hull", "hull"))
+    hull = physics.prepare_part(ring, slim)
+    assert hull.geometry == "convex-hull" and hull.note == "hull"
+    assert physics.simulate_grasp(hull, T, 0.02).reason == "collision"
+
+
+def test_generate_validates_every_exported_grasp():
+    gs = graspgen.generate(
+        trimesh.creation.box(extents=(0.04, 0.03, 0.02)), GRIPPER, units="m", points=1200, k1=3, k2=2, validate=True
+    )
+    v = gs.stats["validation"]
+    assert v["tested"] == len(gs.grasps) == 6
+    assert v["succeeded"] == sum(g["sim"]["success"] for g in gs.grasps)
+    assert v["succeeded"] >= 5
+    assert v["part"]["geometry"] == "convex" and v["engine"].startswith("mujoco")
+    assert set(gs.grasps[0]["sim"]) == {"success", "reason", "slip_mm", "rotation_deg"}
+    assert "validate" in gs.stats["timings_s"]
+
+
+def test_failed_medoids_are_repaired_from_their_own_cluster(monkeypatch):
+    """A stand-in simulator fails the medoids: each is replaced by the nearest member of its cluster."""
+    box = trimesh.creation.box(extents=(0.04, 0.03, 0.02))
+    plain = graspgen.generate(box, GRIPPER, units="m", points=1200, k1=3, k2=2)
+    medoids = set(plain.candidates.medoids.tolist())
+    calls = []
+
+    def fake(sim, poses, widths, *, seed=0, keys=None, workers=None):
+        calls.append(list(keys))
+        return [
+            physics.SimResult(False, "slipped", 9.0, 0.0, 2)
+            if int(k) in medoids
+            else physics.SimResult(True, None, 0.1, 0.0, 2)
+            for k in keys
+        ]
+
+    monkeypatch.setattr(physics, "simulate_grasps", fake)
+    gs = graspgen.generate(box, GRIPPER, units="m", points=1200, k1=3, k2=2, validate=True, repair_limit=2)
+    v = gs.stats["validation"]
+    assert v["first_pass"]["succeeded"] == 0 and v["succeeded"] == 6 and v["repaired"] == 6
+    c = gs.candidates
+    for g in gs.grasps:
+        assert g["sim"]["success"] and g["medoid"] in medoids
+        assert tuple(c.labels[g["candidate"]]) == tuple(c.labels[g["medoid"]])
+        assert g["candidate"] not in medoids
+    assert len(calls) == 2 and sorted(calls[0]) == sorted(medoids)  # one repair round was enough
+
+
+def test_repair_gives_up_after_the_limit(monkeypatch):
+    box = trimesh.creation.box(extents=(0.04, 0.03, 0.02))
+
+    def fail(sim, poses, widths, *, seed=0, keys=None, workers=None):
+        return [physics.SimResult(False, "dropped", 30.0, 0.0, 0) for _ in keys]
+
+    monkeypatch.setattr(physics, "simulate_grasps", fail)
+    gs = graspgen.generate(box, GRIPPER, units="m", points=1200, k1=3, k2=2, validate=True, repair_limit=3)
+    v = gs.stats["validation"]
+    assert v["succeeded"] == 0 and v["repaired"] == 0 and v["simulated"] == 6 * 4
+    assert all("medoid" not in g and g["sim"]["reason"] == "dropped" for g in gs.grasps)
