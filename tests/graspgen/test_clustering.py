@@ -225,6 +225,13 @@ def test_large_n_never_builds_the_full_matrix_and_finds_the_blobs(monkeypatch):
     assert r.loss == pytest.approx(np.linalg.norm(X - X[r.medoids][r.labels], axis=1).sum())
 
 
+def test_default_sample_grows_with_k_and_stays_bounded():
+    assert clustering._default_sample_size(16) == 1800
+    assert clustering._default_sample_size(4) == 1200
+    assert clustering._default_sample_size(1000) == 10_000
+    assert clustering._default_sample_size(10_000) == 20_000  # still more than k, as FasterPAM needs
+
+
 def test_deterministic():
     rng = np.random.default_rng(2)
     X = rng.random((6000, 3))
@@ -259,6 +266,7 @@ def test_fewer_points_than_k_are_all_medoids():
 
 
 def test_empty_input():
+    assert two_stage([], [], 16, 4).medoids.size == 0
     r = kmedoids(np.zeros((0, 3)), 4)
     assert r.medoids.shape == (0,) and r.labels.shape == (0,) and r.loss == 0.0
     assert fasterpam(np.zeros((0, 0)), 2).medoids.size == 0
