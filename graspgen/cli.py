@@ -52,6 +52,14 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--inside", action="store_true", help="also inside grasps (fingers opening outwards)")
     p.add_argument("--collision", choices=("swept", "paper"), default="swept", help="collision model")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--select",
+        choices=("medoid", "best-near-medoid"),
+        default="medoid",
+        help="medoid (the paper) or the best-scoring member near each medoid (docs/QUALITY.md)",
+    )
+    p.add_argument("--validate", action="store_true", help="simulate every exported grasp in MuJoCo")
+    p.add_argument("--density", type=float, default=None, help="part density for --validate, kg/m^3 (default 7850)")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -66,11 +74,18 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("--out", required=True, help="grasp_set/1 JSON to write")
     g.add_argument("--candidates", help="candidate NPZ to write")
     g.add_argument("--recording", help="Rerun .rrd to write")
+    g.add_argument("--preview", help="PNG picture of the grasps to write")
     g.add_argument("--quiet", action="store_true", help="no summary table")
     d = sub.add_parser("demo", help="grasps for a shipped example part, written to out/demo/")
     d.add_argument("--part", default="ring-screw", help="example part (default ring-screw)")
     _add_run_options(d)
     d.add_argument("--out-dir", default="out/demo")
+    r = sub.add_parser("render", help="PNG picture of a grasp set on its part")
+    r.add_argument("grasps", help="grasp_set/1 JSON")
+    r.add_argument("--mesh", required=True, help="the part's mesh")
+    r.add_argument("--units", required=True, choices=("mm", "cm", "m", "in"), help="the length unit of the mesh")
+    r.add_argument("--out", required=True, help="PNG to write")
+    r.add_argument("--size", default="800x600", help="WIDTHxHEIGHT in pixels (default 800x600)")
     for name in ("serve", "worker", "migrate"):
         sub.add_parser(name, help=f"service: {name} (see docs/SERVICE.md)", add_help=False)
     return parser
@@ -90,6 +105,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "generate":
             return _generate(args)
+        if args.command == "render":
+            return _render(args)
         return _demo(args)
     except GraspgenError as exc:
         print(f"graspgen: error: {exc.message}", file=sys.stderr)
@@ -120,6 +137,54 @@ def _run_kwargs(args: argparse.Namespace) -> dict[str, Any]:
     )
 
 
+def _quality_kwargs(args: argparse.Namespace) -> dict[str, Any]:
+    return dict(select=args.select, validate=args.validate, density=args.density)
+
+
+def _preview_of(mesh_path: str, units: str):
+    """A function result -> PNG bytes drawing the result on the part (a point cloud: on its convex hull)."""
+
+    def preview(result) -> bytes:
+        from .parts import load_part
+        from .render import render_grasp_set
+
+        part = load_part(mesh_path, units=units)
+        mesh = part.mesh
+        if mesh is None:
+            import trimesh
+
+            mesh = trimesh.convex.convex_hull(part.points)
+        return render_grasp_set(mesh, result.to_json())
+
+    return preview
+
+
+def _render(args: argparse.Namespace) -> int:
+    import json
+
+    from .export import write_atomic
+    from .parts import load_part
+    from .render import parse_size, render_grasp_set
+
+    size = parse_size(args.size)
+    try:
+        export = json.loads(Path(args.grasps).read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise GraspgenError(f"cannot read grasp set {args.grasps}: {exc}") from None
+    if not isinstance(export, dict) or "grasps" not in export or "gripper" not in export:
+        raise GraspgenError(f"{args.grasps} is not a grasp_set/1 export")
+    part = load_part(args.mesh, units=args.units)
+    if part.mesh is None:
+        import trimesh
+
+        mesh = trimesh.convex.convex_hull(part.points)
+    else:
+        mesh = part.mesh
+    write_atomic(args.out, render_grasp_set(mesh, export, size=size))
+    print(f"wrote {args.out} ({size[0]}x{size[1]}, {len(export['grasps'])} grasps)")
+    return 0
+
+
 def _generate(args: argparse.Namespace) -> int:
     from . import pipeline
     from .gripper import GripperSpec
@@ -139,6 +204,7 @@ def _generate(args: argparse.Namespace) -> int:
         "out": Path(args.out),
         "candidates": args.candidates and Path(args.candidates),
         "recording": args.recording and Path(args.recording),
+        "preview": args.preview and Path(args.preview),
     }
     return _run_and_write(
         lambda rec, progress: pipeline.generate(
@@ -149,9 +215,11 @@ def _generate(args: argparse.Namespace) -> int:
             progress=progress,
             object_name=args.name,
             **_run_kwargs(args),
+            **_quality_kwargs(args),
         ),
         outputs,
         quiet=args.quiet,
+        preview=_preview_of(args.mesh, args.units) if args.preview else None,
     )
 
 
@@ -171,7 +239,7 @@ def _demo(args: argparse.Namespace) -> int:
     )
     code = _run_and_write(
         lambda rec, progress: pipeline.generate(
-            part, DEMO_GRIPPER, recording=rec, progress=progress, **_run_kwargs(args)
+            part, DEMO_GRIPPER, recording=rec, progress=progress, **_run_kwargs(args), **_quality_kwargs(args)
         ),
         outputs,
         quiet=False,
@@ -184,7 +252,7 @@ def _demo(args: argparse.Namespace) -> int:
     return code
 
 
-def _run_and_write(run, outputs: dict[str, Path | None], *, quiet: bool) -> int:
+def _run_and_write(run, outputs: dict[str, Path | None], *, quiet: bool, preview=None) -> int:
     """Run, then move every output into place only when all of them were written: nothing half-done."""
     tag = uuid.uuid4().hex[:8]
     temps: dict[str, Path] = {}
@@ -199,6 +267,8 @@ def _run_and_write(run, outputs: dict[str, Path | None], *, quiet: bool) -> int:
         result.save(temps["out"])
         if "candidates" in temps:
             result.save_candidates(temps["candidates"])
+        if "preview" in temps:
+            temps["preview"].write_bytes(preview(result))
         for key, tmp in temps.items():
             os.replace(tmp, outputs[key])
     finally:
@@ -253,10 +323,41 @@ def _summary(result) -> str:
         ("rejected: collision", f"{rej['collision']:,}"),
         ("candidates", f"{s['candidates']:,}"),
         ("grasps", f"{len(result.grasps)}"),
+        *_quality_rows(s),
         ("time", " ".join(f"{k} {v:.2f}s" for k, v in t.items())),
     ]
     w = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{w}}  {v}" for k, v in rows)
+
+
+def _quality_rows(s: dict[str, Any]) -> list[tuple[str, str]]:
+    rows = []
+    cov = s.get("coverage")
+    if cov:
+        rows.append(
+            (
+                "coverage",
+                ", ".join(
+                    f"{lv['share']:.1%} at {lv['radius'] * 100:g} cm/{lv['angle_deg']:g} deg" for lv in cov["levels"]
+                ),
+            )
+        )
+    sel = s.get("selection")
+    if sel:
+        rows.append(
+            ("selection", f"{sel['mode']}: {sel['replaced']} replaced, mean score {sel['mean_score_selected']}")
+        )
+    v = s.get("validation")
+    if v:
+        fails = ", ".join(f"{k} {n}" for k, n in v["failures"].items() if n)
+        rows.append(
+            (
+                "validation",
+                f"{v['succeeded']}/{v['tested']} held ({v['repaired']} repaired)"
+                + (f"; failed: {fails}" if fails else ""),
+            )
+        )
+    return rows
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -17,7 +17,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
     from .export import GraspSet
 
-__all__ = ["record_run", "MAX_LOGGED_CANDIDATES", "cluster_colours"]
+__all__ = ["record_run", "MAX_LOGGED_CANDIDATES", "cluster_colours", "SIM_COLOURS"]
 
 #: candidate midpoints beyond this many are thinned (evenly by index) to keep recordings small
 MAX_LOGGED_CANDIDATES = 200_000
@@ -64,6 +64,59 @@ def record_run(
         tmp.unlink(missing_ok=True)
 
 
+#: validation outcome colours: held, failed
+SIM_COLOURS = {True: (40, 180, 70), False: (220, 40, 40)}
+
+
+def _log_validation(stream, result) -> None:
+    """The simulated outcome per grasp: its gripper boxes green (held) or red (failed, labelled with the reason)."""
+    import rerun as rr
+
+    if not any("sim" in g for g in result.grasps):
+        return
+    centers, half, quats, colours, names = [], [], [], [], []
+    for rank, g in enumerate(result.grasps):
+        sim = g.get("sim")
+        if sim is None:
+            continue
+        T = np.asarray(g["pose"])
+        q = rr.Quaternion(xyzw=matrix_to_quaternion_xyzw(T))
+        label = f"#{rank} " + ("held" if sim["success"] else sim["reason"]) + f" slip {sim['slip_mm']:.2f} mm"
+        for box in result.gripper.boxes(g["width"]):
+            centers.append(T[:3, :3] @ np.asarray(box.center) + T[:3, 3])
+            half.append(np.asarray(box.extents) / 2)
+            quats.append(q)
+            colours.append(SIM_COLOURS[bool(sim["success"])])
+            names.append(label)
+    stream.log(
+        "grasps/validation",
+        rr.Boxes3D(centers=centers, half_sizes=half, quaternions=quats, colors=colours, labels=names),
+        static=True,
+    )
+
+
+def _log_coverage(stream, stats) -> None:
+    """Coverage and diversity figures as a small table."""
+    import rerun as rr
+
+    cov = stats.get("coverage")
+    if not cov:
+        return
+    lines = ["| radius | axis angle | coverage |", "|---|---|---|"]
+    lines += [f"| {lv['radius'] * 100:g} cm | {lv['angle_deg']:g} deg | {lv['share']:.1%} |" for lv in cov["levels"]]
+    if cov.get("min_pair_translation") is not None:
+        lines.append("")
+        lines.append(
+            f"closest selected pair: {cov['min_pair_translation'] * 1e3:.1f} mm apart, "
+            f"axes {cov['min_pair_angle_deg']:.1f} deg apart, combined {cov['min_pair_combined']:.2f}"
+        )
+    v = stats.get("validation")
+    if v:
+        lines.append("")
+        lines.append(f"validation: {v['succeeded']}/{v['tested']} held, {v['repaired']} repaired")
+    stream.log("stats/coverage", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN), static=True)
+
+
 def _log(stream, result, points, normals, extra) -> None:
     import rerun as rr
 
@@ -107,6 +160,8 @@ def _log(stream, result, points, normals, extra) -> None:
         stream.log(
             "grasps/closing_axes", rr.Arrows3D(origins=axes_o, vectors=axes_v, colors=[230, 60, 60]), static=True
         )
+        _log_validation(stream, result)
+    _log_coverage(stream, result.stats)
     summary = {
         "object": result.object,
         "params": result.params.to_dict(friction=result.friction),

@@ -165,3 +165,24 @@ def test_repair_gives_up_after_the_limit(monkeypatch):
     v = gs.stats["validation"]
     assert v["succeeded"] == 0 and v["repaired"] == 0 and v["simulated"] == 6 * 4
     assert all("medoid" not in g and g["sim"]["reason"] == "dropped" for g in gs.grasps)
+
+
+def test_recording_holds_the_validation_outcome_and_coverage(tmp_path):
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    box = trimesh.creation.box(extents=(0.04, 0.03, 0.02))
+    graspgen.generate(box, GRIPPER, units="m", points=800, k1=2, k2=1, validate=True, recording=tmp_path / "r.rrd")
+    rerun = shutil.which("rerun", path=str(Path(sys.executable).parent))
+    assert rerun, "the rerun CLI ships with rerun-sdk"
+    r = subprocess.run(
+        [rerun, "rrd", "print", str(tmp_path / "r.rrd")],
+        capture_output=True,
+        text=True,
+        env={"RERUN_ANALYTICS": "off", "PATH": "/usr/bin:/bin"},
+        timeout=120,
+    )
+    assert r.returncode == 0, r.stderr
+    assert "/grasps/validation" in r.stdout and "/stats/coverage" in r.stdout
