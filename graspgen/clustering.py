@@ -1,9 +1,11 @@
 """k-medoids (FasterPAM) and the two-stage grasp clustering of Kleeberger et al.
 
 `fasterpam` is Schubert & Rousseeuw's FasterPAM (Information Systems 101, 2021): eager swaps, the O(k)
-removal-loss bookkeeping with nearest / second-nearest medoid per point. It is written here with numba because the
-reference implementation (the `kmedoids` package) is GPL-3 and graspgen is Apache-2.0; that package is used only by
-the tests and benchmarks, as a yardstick.
+removal-loss bookkeeping with nearest / second-nearest medoid per point, O(n^2) per pass over the data, seeded by
+greedy k-medoids++ (points drawn with probability proportional to their distance, 2 + ln k trials per medoid, the
+trial that lowers the loss most kept). It is written here with numba because the reference implementation (the
+`kmedoids` package) is GPL-3 and graspgen is Apache-2.0; that package is used only by the tests and benchmarks, as a
+yardstick.
 
 `kmedoids` works on points: up to `exact_limit` points it runs FasterPAM on the full dissimilarity matrix; above it
 runs CLARA-style draws (FasterPAM on a sample, every point assigned to its nearest medoid, the loss taken over all
@@ -55,7 +57,7 @@ EXACT_LIMIT = 4000
 DRAWS = 5
 MAX_ITER = 100
 
-#: largest default CLARA sample (for k up to 5,000; above that 2k) ...
+#: the default CLARA sample, 1000 + 50 k, stops growing here (unless 2 k is larger) ...
 _SAMPLE_CAP = 10_000
 #: ... and the largest matrix side kmedoids() builds: 20,000^2 float64 is 3.2 GB (so k1 <= 10,000, as Params allow)
 _MAX_MATRIX = 20_000
