@@ -15,6 +15,7 @@ from services.common.storage import make_storage
 from services.common.tokens import TokenStore
 from services.worker.dispatch import Dispatcher, EmbeddedDispatcher, make_dispatcher
 
+from .http import BlobCache
 from .limits import MULTIPART_OVERHEAD, BodyLimitMiddleware
 from .problems import install_problem_handlers, problem_schema
 from .routers import grasp_sets, grippers, health, jobs, objects
@@ -78,6 +79,7 @@ def create_app(
     app.state.db = db
     app.state.storage = storage
     app.state.tokens = tokens
+    app.state.export_cache = BlobCache(storage, settings.export_cache_bytes)
     app.state.dispatcher = dispatcher
     install_problem_handlers(app)
     for r in (objects.router, grippers.router, jobs.router, grasp_sets.router, health.router):

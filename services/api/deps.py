@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import AsyncIterator, Callable
 from typing import Annotated
 
 from fastapi import Depends, Request
@@ -30,25 +30,32 @@ __all__ = [
 _bearer = HTTPBearer(auto_error=False, description="A token from the tokens file; scopes read < write < admin")
 
 
-def get_session(request: Request) -> Iterator[Session]:
-    """One session per request; the route commits explicitly, anything unfinished rolls back."""
-    with request.app.state.db.sessions() as session:
+async def get_session(request: Request) -> AsyncIterator[Session]:
+    """One session per request; the route commits explicitly, anything unfinished rolls back.
+
+    Async so that opening it costs no thread-pool hop: a Session does no I/O until the route (in a worker thread)
+    uses it; closing only returns its connection to the pool.
+    """
+    session = request.app.state.db.sessions()
+    try:
         yield session
+    finally:
+        session.close()
 
 
-def get_settings(request: Request) -> Settings:
+async def get_settings(request: Request) -> Settings:
     return request.app.state.settings
 
 
-def get_storage(request: Request) -> Storage:
+async def get_storage(request: Request) -> Storage:
     return request.app.state.storage
 
 
-def get_dispatcher(request: Request) -> Dispatcher:
+async def get_dispatcher(request: Request) -> Dispatcher:
     return request.app.state.dispatcher
 
 
-def get_principal(
+async def get_principal(
     request: Request, credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
 ) -> Principal:
     challenge = {"WWW-Authenticate": 'Bearer realm="graspgen"'}
@@ -62,7 +69,8 @@ def get_principal(
 
 
 def require(scope: str) -> Callable[[Principal], Principal]:
-    def _check(principal: Annotated[Principal, Depends(get_principal)]) -> Principal:
+    # async: no I/O here, and a sync dependency would cost a thread-pool hop on every request
+    async def _check(principal: Annotated[Principal, Depends(get_principal)]) -> Principal:
         if not principal.has(scope):
             raise ApiError(403, "forbidden", f"the token lacks the {scope!r} scope", required_scope=scope)
         return principal

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
+
 from fastapi import Request, Response
 from fastapi.responses import StreamingResponse
 
@@ -9,7 +12,7 @@ from services.common.storage import Storage
 
 from .problems import ApiError
 
-__all__ = ["IMMUTABLE", "REVALIDATE", "not_modified", "etag_matches", "blob_response", "blob_etag"]
+__all__ = ["BlobCache", "IMMUTABLE", "REVALIDATE", "not_modified", "etag_matches", "blob_response", "blob_etag"]
 
 IMMUTABLE = "private, max-age=31536000, immutable"
 REVALIDATE = "private, no-cache"
@@ -54,3 +57,35 @@ def blob_response(
         "Content-Disposition": f'attachment; filename="{filename}"',
     }
     return StreamingResponse(storage.iter_chunks(key), media_type=media_type, headers=headers)
+
+
+class BlobCache:
+    """Bytes of immutable blobs (grasp-set exports) kept in memory, least recently used evicted first.
+
+    Content-addressed keys never change meaning, so nothing is ever invalidated; with S3 storage this saves a round
+    trip to the bucket on every catalogue lookup.
+    """
+
+    def __init__(self, storage: Storage, max_bytes: int) -> None:
+        self.storage = storage
+        self.max_bytes = max_bytes
+        self._items: OrderedDict[str, bytes] = OrderedDict()
+        self._size = 0
+        self._lock = threading.Lock()
+
+    def get(self, key: str) -> bytes:
+        with self._lock:
+            data = self._items.get(key)
+            if data is not None:
+                self._items.move_to_end(key)
+                return data
+        data = self.storage.get_bytes(key)
+        if len(data) <= self.max_bytes:
+            with self._lock:
+                if key not in self._items:
+                    self._items[key] = data
+                    self._size += len(data)
+                    while self._size > self.max_bytes:
+                        _, old = self._items.popitem(last=False)
+                        self._size -= len(old)
+        return data

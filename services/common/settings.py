@@ -47,6 +47,8 @@ class Settings(BaseSettings):
     max_bulk_items: int = Field(default=1000, ge=1, le=100_000)
     page_size_default: int = Field(default=50, ge=1, le=1000)
     page_size_max: int = Field(default=500, ge=1, le=10_000)
+    #: grasp-set exports kept in the API's memory (they are immutable, so the cache is never invalidated)
+    export_cache_bytes: int = Field(default=64 * 1024 * 1024, ge=0)
 
     # -- jobs -----------------------------------------------------------------------------------------------------
     job_soft_time_limit_s: int = Field(default=900, ge=1)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import hashlib
 import json
+import uuid
+from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
 
@@ -24,7 +26,33 @@ __all__ = [
     "list_catalogue",
     "list_grasps",
     "etag_of",
+    "ExportRef",
+    "export_ref",
+    "dumps",
 ]
+
+
+@dataclass(frozen=True)
+class ExportRef:
+    """What serving an export needs, read in one query."""
+
+    id: int
+    version: int
+    export_key: str
+    export_sha256: str
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, datetime):
+        return value.isoformat().replace("+00:00", "Z")
+    if isinstance(value, uuid.UUID):
+        return str(value)
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+def dumps(body: Any) -> bytes:
+    """JSON of a response body built here (hot paths skip response-model validation)."""
+    return json.dumps(body, default=_json_default, separators=(",", ":")).encode()
 
 
 def etag_of(sha256: str) -> str:
@@ -32,8 +60,22 @@ def etag_of(sha256: str) -> str:
 
 
 def summary_select() -> Select:
+    # columns, not entities: no ORM identity map and no stats JSON to decode for a list
     return (
-        select(GraspSet, ObjectModel.name, ObjectVersion.version, Gripper.name, GripperVersion.version)
+        select(
+            GraspSet.id,
+            GraspSet.version,
+            GraspSet.params,
+            GraspSet.derived_from_id,
+            GraspSet.job_id,
+            GraspSet.grasp_count,
+            GraspSet.export_sha256,
+            GraspSet.created_at,
+            ObjectModel.name.label("object"),
+            ObjectVersion.version.label("object_version"),
+            Gripper.name.label("gripper"),
+            GripperVersion.version.label("gripper_version"),
+        )
         .join(ObjectModel, ObjectModel.id == GraspSet.object_id)
         .join(ObjectVersion, ObjectVersion.id == GraspSet.object_version_id)
         .join(Gripper, Gripper.id == GraspSet.gripper_id)
@@ -42,28 +84,27 @@ def summary_select() -> Select:
 
 
 def summary_out(row: Any) -> dict[str, Any]:
-    gs, obj, obj_v, grip, grip_v = row
-    base = f"/v1/grasp-sets/{gs.id}"
+    base = f"/v1/grasp-sets/{row.id}"
     return {
-        "id": gs.id,
-        "object": obj,
-        "object_version": obj_v,
-        "gripper": grip,
-        "gripper_version": grip_v,
-        "version": gs.version,
-        "params": gs.params,
-        "derived_from": gs.derived_from_id,
-        "job": gs.job_id,
-        "grasp_count": gs.grasp_count,
-        "sha256": gs.export_sha256,
-        "etag": etag_of(gs.export_sha256),
-        "created_at": gs.created_at,
+        "id": row.id,
+        "object": row.object,
+        "object_version": row.object_version,
+        "gripper": row.gripper,
+        "gripper_version": row.gripper_version,
+        "version": row.version,
+        "params": row.params,
+        "derived_from": row.derived_from_id,
+        "job": row.job_id,
+        "grasp_count": row.grasp_count,
+        "sha256": row.export_sha256,
+        "etag": etag_of(row.export_sha256),
+        "created_at": row.created_at,
         "links": {
             "self": base,
             "candidates": base + "/candidates",
             "recording": base + "/recording",
             "grasps": base + "/grasps",
-            "catalogue": f"/v1/catalogue/{obj}/{grip}?version={gs.version}",
+            "catalogue": f"/v1/catalogue/{row.object}/{row.gripper}?version={row.version}",
         },
     }
 
@@ -89,7 +130,7 @@ def list_grasp_sets(
     rows = session.execute(q.order_by(GraspSet.id.desc()).limit(limit + 1)).all()
     more = len(rows) > limit
     rows = rows[:limit]
-    nxt = encode_cursor([rows[-1][0].id]) if more and rows else None
+    nxt = encode_cursor([rows[-1].id]) if more and rows else None
     query = "".join(f"&{k}={v}" for k, v in (("object", object), ("gripper", gripper)) if v)
     return {
         "items": [summary_out(r) for r in rows],
@@ -105,16 +146,33 @@ def get_grasp_set(session: Session, grasp_set_id: int) -> GraspSet:
     return gs
 
 
-def catalogue_entry(session: Session, object: str, gripper: str, version: int | None) -> GraspSet:
-    obj_id = _id_of(session, ObjectModel, object, "object")
-    grip_id = _id_of(session, Gripper, gripper, "gripper")
-    q = select(GraspSet).where(GraspSet.object_id == obj_id, GraspSet.gripper_id == grip_id)
+def export_ref(session: Session, grasp_set_id: int) -> ExportRef:
+    row = session.execute(
+        select(GraspSet.id, GraspSet.version, GraspSet.export_key, GraspSet.export_sha256).where(
+            GraspSet.id == grasp_set_id
+        )
+    ).first()
+    if row is None:
+        raise ApiError(404, "not-found", f"no grasp set {grasp_set_id}")
+    return ExportRef(*row)
+
+
+def catalogue_entry(session: Session, object: str, gripper: str, version: int | None) -> ExportRef:
+    q = (
+        select(GraspSet.id, GraspSet.version, GraspSet.export_key, GraspSet.export_sha256)
+        .join(ObjectModel, ObjectModel.id == GraspSet.object_id)
+        .join(Gripper, Gripper.id == GraspSet.gripper_id)
+        .where(ObjectModel.name == object, Gripper.name == gripper)
+    )
     q = q.where(GraspSet.version == version) if version else q.order_by(GraspSet.version.desc()).limit(1)
-    gs = session.execute(q).scalars().first()
-    if gs is None:
+    row = session.execute(q).first()
+    if row is None:
+        # only the miss pays for saying which name is unknown
+        _id_of(session, ObjectModel, object, "object")
+        _id_of(session, Gripper, gripper, "gripper")
         what = f"version {version}" if version else "grasp set"
         raise ApiError(404, "not-found", f"no {what} for object {object!r} with gripper {gripper!r}")
-    return gs
+    return ExportRef(*row)
 
 
 def list_catalogue(
@@ -141,7 +199,7 @@ def list_catalogue(
     rows = session.execute(q.order_by(ObjectModel.name).limit(limit + 1)).all()
     more = len(rows) > limit
     rows = rows[:limit]
-    nxt = encode_cursor([rows[-1][1]]) if more and rows else None
+    nxt = encode_cursor([rows[-1].object]) if more and rows else None
     since = f"&updated_since={updated_since.isoformat()}" if updated_since else ""
     body = {
         "gripper": gripper,
@@ -150,7 +208,7 @@ def list_catalogue(
         "links": {"next": f"/v1/catalogue?gripper={gripper}{since}&cursor={nxt}&limit={limit}" if nxt else None},
     }
     # the page is a function of its grasp-set ids and export hashes, so hashing those is a strong validator
-    basis = json.dumps([gripper, nxt, [(r[0].id, r[0].export_sha256) for r in rows]]).encode()
+    basis = json.dumps([gripper, nxt, [(r.id, r.export_sha256) for r in rows]]).encode()
     return body, etag_of(hashlib.sha256(basis).hexdigest())
 
 

@@ -5,12 +5,9 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Path, Query, Request, Response
 
-from services.common.models import GraspSet
-from services.common.storage import Storage
-
 from ..crud import grasp_sets as crud
 from ..deps import ReadDep, SessionDep, SettingsDep, StorageDep
-from ..http import IMMUTABLE, REVALIDATE, blob_response, etag_matches, not_modified
+from ..http import IMMUTABLE, REVALIDATE, BlobCache, blob_response, etag_matches, not_modified
 from ..problems import ApiError
 from ..schemas import SLUG, GraspPage, GraspSetPage
 from . import problems
@@ -40,13 +37,14 @@ _EXPORT_RESPONSE: dict[int | str, dict[str, Any]] = {
 }
 
 
-def export_response(request: Request, storage: Storage, gs: GraspSet, *, cache_control: str) -> Response:
-    etag = crud.etag_of(gs.export_sha256)
-    headers = {"ETag": etag, "Cache-Control": cache_control, "Content-Location": f"/v1/grasp-sets/{gs.id}"}
+def export_response(request: Request, ref: crud.ExportRef, *, cache_control: str) -> Response:
+    etag = crud.etag_of(ref.export_sha256)
+    headers = {"ETag": etag, "Cache-Control": cache_control, "Content-Location": f"/v1/grasp-sets/{ref.id}"}
     if etag_matches(request, etag):
         return not_modified(etag, cache_control)
+    cache: BlobCache = request.app.state.export_cache
     try:
-        body = storage.get_bytes(gs.export_key)
+        body = cache.get(ref.export_key)
     except FileNotFoundError:
         raise ApiError(503, "artifact-missing", "the export is missing from storage") from None
     return Response(body, media_type="application/json", headers=headers)
@@ -79,10 +77,8 @@ def list_grasp_sets(
     response_class=Response,
     responses={**_EXPORT_RESPONSE, **problems(304, 404, 422)},
 )
-def get_grasp_set(
-    request: Request, grasp_set_id: GraspSetId, principal: ReadDep, session: SessionDep, storage: StorageDep
-) -> Response:
-    return export_response(request, storage, crud.get_grasp_set(session, grasp_set_id), cache_control=IMMUTABLE)
+def get_grasp_set(request: Request, grasp_set_id: GraspSetId, principal: ReadDep, session: SessionDep) -> Response:
+    return export_response(request, crud.export_ref(session, grasp_set_id), cache_control=IMMUTABLE)
 
 
 @router.get(
@@ -165,7 +161,6 @@ def list_grasps(
 )
 def list_catalogue(
     request: Request,
-    response: Response,
     principal: ReadDep,
     session: SessionDep,
     settings: SettingsDep,
@@ -187,9 +182,9 @@ def list_catalogue(
     )
     if etag_matches(request, etag):
         return not_modified(etag, REVALIDATE)
-    response.headers["ETag"] = etag
-    response.headers["Cache-Control"] = REVALIDATE
-    return body
+    return Response(
+        crud.dumps(body), media_type="application/json", headers={"ETag": etag, "Cache-Control": REVALIDATE}
+    )
 
 
 @router.get(
@@ -205,9 +200,8 @@ def get_catalogue_entry(
     gripper: Annotated[str, Path(pattern=SLUG)],
     principal: ReadDep,
     session: SessionDep,
-    storage: StorageDep,
     version: Annotated[int | None, Query(ge=1)] = None,
 ) -> Response:
-    gs = crud.catalogue_entry(session, object, gripper, version)
+    ref = crud.catalogue_entry(session, object, gripper, version)
     # a numbered version never changes; "the newest" does, so clients revalidate it with the ETag
-    return export_response(request, storage, gs, cache_control=IMMUTABLE if version else REVALIDATE)
+    return export_response(request, ref, cache_control=IMMUTABLE if version else REVALIDATE)
