@@ -10,10 +10,19 @@ sampled point lies in any box (closed boxes). Modes:
 
 Inside grasps mirror the fingers: they sit between the contacts and open outwards to them.
 
-Speed: the points live in a bounding-volume hierarchy over Morton-ordered leaves. A node is skipped when its
-box misses every region's slab along the axis or its radial band around the axis; a node lying wholly inside
-the disc that every roll of a finger covers blocks all rolls at once. Points that blocked rolls recently are
-kept per thread and tried first, because neighbouring candidates share most of their blockers.
+Exactness: the result is, bit for bit, what testing every point against every box at every roll gives with the
+per-point arithmetic of `_point_mask` (grasp-frame coordinates x = q.X, y = c_k (q.Y0) + s_k (q.Z0),
+z = -s_k (q.Y0) + c_k (q.Z0)). Everything else only decides which points need that test: the bounds are padded
+far beyond rounding error, and every shortcut (a node wholly inside or outside a box, a point inside the disc
+that every roll of a finger covers, the half-turn symmetry of the finger boxes) keeps a guard band and falls
+back to the per-roll test inside it.
+
+Speed: the points live in a bounding-volume hierarchy (a balanced binary tree split along the principal axis,
+oriented boxes per node). A node is skipped when its box misses every region's slab along the axis, its
+radial band around the axis, or (for the palm, and for the fingers once few rolls are open) the region at
+every open roll; a node lying wholly inside a region at a roll blocks that roll at once. Points that blocked
+rolls recently are kept per thread and tried first, because neighbouring candidates share most of their
+blockers.
 """
 
 from __future__ import annotations
@@ -31,9 +40,12 @@ __all__ = ["MAX_ROLLS", "CollisionModel", "collision_model", "free_rolls"]
 
 #: roll masks are one 64-bit word per candidate
 MAX_ROLLS = 64
-_LEAF = 8
-_CACHE = 8
-_CHUNK = 64
+_LEAF = 8  # most points per leaf
+_CACHE = 8  # recent blockers kept per thread and phase
+_CHUNK = 64  # candidates per parallel task
+_FINGER_ANGULAR = 4  # per-roll node tests for the fingers once at most this many (symmetric pairs of) rolls are open
+_GUARD = 1e-9  # relative guard band of the point-level shortcuts
+_STATS = 8  # counters per chunk: see free_rolls_stats
 
 
 @dataclass(frozen=True)
@@ -74,91 +86,98 @@ def collision_model(gripper: GripperSpec, mode: str, tolerances: Tolerances = TO
     )
 
 
-def _regions(model: CollisionModel) -> np.ndarray:
-    """Per-region constants (r, 10): kind, hy, z_lo, z_hi, r_min, r_max, r_in, palm half-x, angular half-width
-    and centre angle of the region's sector around the axis at roll 0 (used for the palm only).
+# region constants, one row per region (0 = finger at -x, 1 = finger at +x, 2 = palm)
+_HY, _ZLO, _ZHI, _RMIN, _RMAX, _RIN, _RMIN2, _RMAX2, _RIN2, _SYM, _PX = range(11)
 
-    kind 0 = finger at -x, 1 = finger at +x, 2 = palm. The x extent of fingers depends on the width and is
-    computed per candidate.
-    """
+
+def _regions(model: CollisionModel) -> np.ndarray:
+    """Per-region constants (r, 11): hy, z_lo, z_hi, radial band r_min..r_max around the axis that holds the
+    region's (y, z) rectangle at every roll, r_in (the disc inside it at every roll), the same squared with the
+    point-level guard band, whether the rectangle is symmetric under a half turn, and the palm's half x extent.
+    The x extent of the fingers depends on the width and is computed per candidate."""
     hy, hz = model.half_finger_width, model.half_finger_depth
-    r_max = np.hypot(hy, hz)
-    rows = [[0, hy, -hz, hz, 0.0, r_max, min(hy, hz), 0.0, np.pi, 0.0]]
-    rows.append([1, *rows[0][1:]])
+    r_max = float(np.hypot(hy, hz))
+    r_in = min(hy, hz)
+    lo, hi = 1.0 - _GUARD, 1.0 + _GUARD
+    finger = [hy, -hz, hz, 0.0, r_max, r_in, 0.0, r_max * r_max * hi, r_in * r_in * lo, 1.0, 0.0]
+    rows = [finger, list(finger)]
     if model.palm is not None:
         phx, phy, zlo, zhi = model.palm
         r_min = 0.0 if zlo <= 0.0 <= zhi else min(abs(zlo), abs(zhi))
-        # the palm lies wholly on the -z side (zhi < 0): its sector is centred on -pi/2, widest at z = zhi
-        beta = np.arctan2(phy, abs(zhi)) if zhi < 0 else np.pi
-        rows.append([2, phy, zlo, zhi, r_min, np.hypot(phy, max(abs(zlo), abs(zhi))), 0.0, phx, beta, -np.pi / 2])
+        r_mx = float(np.hypot(phy, max(abs(zlo), abs(zhi))))
+        sym = 1.0 if zlo == -zhi else 0.0
+        rows.append([phy, zlo, zhi, r_min, r_mx, 0.0, r_min * r_min * lo, r_mx * r_mx * hi, -1.0, sym, phx])
     return np.array(rows, dtype=np.float64)
 
 
 # -- bounding-volume hierarchy ------------------------------------------------------------------------------------
 
 
-def _morton_order(points: np.ndarray) -> np.ndarray:
-    lo = points.min(axis=0)
-    span = max(float((points.max(axis=0) - lo).max()), 1e-12)
-    q = np.minimum(((points - lo) / span * 1023.0).astype(np.int64), 1023)
-    code = np.zeros(len(points), dtype=np.int64)
-    for bit in range(10):
-        for axis in range(3):
-            code |= ((q[:, axis] >> bit) & 1) << (3 * bit + axis)
-    return np.argsort(code, kind="stable")
-
-
 @njit(cache=True)
-def _build_bvh(P, N, leaves, leaf_size):
-    """Implicit complete binary tree: node 1 is the root, children 2k and 2k+1, leaves from `leaves` on.
+def _build_tree(P, leaves, pad):
+    """Balanced implicit binary tree over a permutation of the points: node 1 is the root, children 2k and 2k+1,
+    leaves from `leaves` on. Node k at depth d (t = k - 2^d) holds the points [t n >> d, (t + 1) n >> d) of the
+    permuted order; each inner node splits its points at the median along their principal axis.
 
-    Each node has an axis-aligned box (lo, hi) and a disc bound (disc: centre xyz, unit normal xyz, thickness
-    along the normal, radius in its plane): surface patches are thin along their normal, and near a contact the
-    closing axis is close to that normal, so the disc projects onto the axis far tighter than the box.
+    Returns (perm, nodes): nodes (2 leaves, 16) = oriented box (centre xyz, three unit axes as rows, half
+    extents) and the radius of the ball around the centre that holds the node's points, all padded by `pad`.
     """
     n = P.shape[0]
-    lo = np.full((2 * leaves, 3), np.inf)
-    hi = np.full((2 * leaves, 3), -np.inf)
-    disc = np.zeros((2 * leaves, 8))
+    Q = P.copy()
+    perm = np.arange(n)
+    nodes = np.zeros((2 * leaves, 16))
+    depth = 0
+    cov = np.zeros((3, 3))
     for node in range(1, 2 * leaves):
-        depth = 0
-        k = node
-        while k > 1:
-            k >>= 1
+        if node >= (1 << (depth + 1)):
             depth += 1
-        span = leaves >> depth  # leaves under this node
-        first_leaf = node * span - leaves
-        first = first_leaf * leaf_size
-        last = min(n, (first_leaf + span) * leaf_size)
-        if first >= last:
-            continue
-        cnt = last - first
-        c = np.zeros(3)
-        nm = np.zeros(3)
-        for p in range(first, last):
+        t = node - (1 << depth)
+        s = (t * n) >> depth
+        e = ((t + 1) * n) >> depth
+        cnt = e - s
+        mean = np.zeros(3)
+        for p in range(s, e):
             for a in range(3):
-                lo[node, a] = min(lo[node, a], P[p, a])
-                hi[node, a] = max(hi[node, a], P[p, a])
-                c[a] += P[p, a]
-                nm[a] += N[p, a]
-        c /= cnt
-        ln = np.sqrt(nm[0] ** 2 + nm[1] ** 2 + nm[2] ** 2)
-        if ln < 1e-9:
-            nm[0], nm[1], nm[2] = 0.0, 0.0, 1.0
-        else:
-            nm /= ln
-        th = 0.0
-        rad = 0.0
-        for p in range(first, last):
-            dx, dy, dz = P[p, 0] - c[0], P[p, 1] - c[1], P[p, 2] - c[2]
-            h = dx * nm[0] + dy * nm[1] + dz * nm[2]
-            th = max(th, abs(h))
-            rad = max(rad, np.sqrt(max(dx * dx + dy * dy + dz * dz - h * h, 0.0)))
-        disc[node, 0], disc[node, 1], disc[node, 2] = c[0], c[1], c[2]
-        disc[node, 3], disc[node, 4], disc[node, 5] = nm[0], nm[1], nm[2]
-        disc[node, 6] = th * (1.0 + 1e-12) + 1e-15  # outward rounding keeps the bound conservative
-        disc[node, 7] = rad * (1.0 + 1e-12) + 1e-15
-    return lo, hi, disc
+                mean[a] += Q[p, a]
+        mean /= cnt
+        cov[:, :] = 0.0
+        for p in range(s, e):
+            for a in range(3):
+                for b in range(3):
+                    cov[a, b] += (Q[p, a] - mean[a]) * (Q[p, b] - mean[b])
+        _, V = np.linalg.eigh(cov)
+        ax = np.empty((3, 3))
+        for i in range(3):
+            for a in range(3):
+                ax[i, a] = V[a, 2 - i]  # principal axis first
+        lo = np.full(3, np.inf)
+        hi = np.full(3, -np.inf)
+        for p in range(s, e):
+            for i in range(3):
+                pr = (Q[p, 0] - mean[0]) * ax[i, 0] + (Q[p, 1] - mean[1]) * ax[i, 1] + (Q[p, 2] - mean[2]) * ax[i, 2]
+                lo[i] = min(lo[i], pr)
+                hi[i] = max(hi[i], pr)
+        c = mean.copy()
+        for i in range(3):
+            for a in range(3):
+                c[a] += ax[i, a] * 0.5 * (lo[i] + hi[i])
+        rho = 0.0
+        for p in range(s, e):
+            dx, dy, dz = Q[p, 0] - c[0], Q[p, 1] - c[1], Q[p, 2] - c[2]
+            rho = max(rho, dx * dx + dy * dy + dz * dz)
+        nodes[node, 0:3] = c
+        for i in range(3):
+            nodes[node, 3 + 3 * i : 6 + 3 * i] = ax[i]
+            nodes[node, 12 + i] = 0.5 * (hi[i] - lo[i]) + pad
+        nodes[node, 15] = np.sqrt(rho) + pad
+        if node < leaves:
+            key = np.empty(cnt)
+            for p in range(s, e):
+                key[p - s] = Q[p, 0] * ax[0, 0] + Q[p, 1] * ax[0, 1] + Q[p, 2] * ax[0, 2]
+            o = np.argsort(key, kind="mergesort")
+            Q[s:e] = Q[s:e][o]
+            perm[s:e] = perm[s:e][o]
+    return perm, nodes
 
 
 # -- the kernel --------------------------------------------------------------------------------------------------
@@ -183,193 +202,227 @@ def _basis(ax, ay, az, switch):
 
 
 @njit(cache=True, inline="always")
-def _x_ranges(regions, kind_inside, w, model_f):
-    """Per-region x interval for one candidate; model_f = (t, stroke, min_width, clearance, margin)."""
+def _x_ranges(xr, kind_inside, w, model_f):
+    """Finger x intervals for one candidate into xr[0:2]; model_f = (t, stroke, min_width, clearance, margin)."""
     t, stroke, min_width, clearance, margin = model_f[0], model_f[1], model_f[2], model_f[3], model_f[4]
-    nr = regions.shape[0]
-    xr = np.empty((nr, 2))
-    for r in range(nr):
-        kind = regions[r, 0]
-        if kind == 2.0:
-            xr[r, 0] = -regions[r, 7]
-            xr[r, 1] = regions[r, 7]
-            continue
-        if not kind_inside:
-            o = min(w + clearance, stroke)
-            a, b = w / 2 + margin, max(o, w) / 2 + t
-        else:
-            o = max(w - clearance, min_width + 2 * t)
-            a, b = min(o, w) / 2 - t, w / 2 - margin
-        if kind == 0.0:
-            xr[r, 0], xr[r, 1] = -b, -a
-        else:
-            xr[r, 0], xr[r, 1] = a, b
-    return xr
+    if not kind_inside:
+        o = min(w + clearance, stroke)
+        a, b = w / 2 + margin, max(o, w) / 2 + t
+    else:
+        o = max(w - clearance, min_width + 2 * t)
+        a, b = min(o, w) / 2 - t, w / 2 - margin
+    xr[0, 0], xr[0, 1] = -b, -a
+    xr[1, 0], xr[1, 1] = a, b
 
 
 @njit(cache=True, inline="always")
-def _point_mask(qx, qy, qz, ax, ay, az, yb, zb, regions, r0, r1, xr, cos_k, sin_k, target):
-    """Rolls within `target` blocked by one point (relative position q) in regions r0..r1-1."""
-    x = qx * ax + qy * ay + qz * az
+def _in_rect(y, z, hy, zlo, zhi):
+    return abs(y) <= hy and z >= zlo and z <= zhi
+
+
+@njit(cache=True, inline="always")
+def _point_mask(X, Y, Z, p, F, reg, r0, r1, xr, cos_k, sin_k, half, gfac, todo):
+    """Rolls within `todo` at which point p lies in one of the regions r0..r1-1 (exact per-roll arithmetic)."""
+    qx = X[p] - F[0]
+    qy = Y[p] - F[1]
+    qz = Z[p] - F[2]
+    x = qx * F[3] + qy * F[4] + qz * F[5]
     mask = np.uint64(0)
     for r in range(r0, r1):
         if x < xr[r, 0] or x > xr[r, 1]:
             continue
-        y0 = qx * yb[0] + qy * yb[1] + qz * yb[2]
-        z0 = qx * zb[0] + qy * zb[1] + qz * zb[2]
+        y0 = qx * F[6] + qy * F[7] + qz * F[8]
+        z0 = qx * F[9] + qy * F[10] + qz * F[11]
         r2 = y0 * y0 + z0 * z0
-        if r2 > regions[r, 5] * regions[r, 5] or r2 < regions[r, 4] * regions[r, 4]:
+        if r2 > reg[r, _RMAX2] or r2 < reg[r, _RMIN2]:
             continue
-        if r2 <= regions[r, 6] * regions[r, 6]:
-            return target
-        hy, zlo, zhi = regions[r, 1], regions[r, 2], regions[r, 3]
-        for k in range(cos_k.shape[0]):
-            bit = np.uint64(1) << np.uint64(k)
-            if not (target & bit):
-                continue
-            y = y0 * cos_k[k] + z0 * sin_k[k]
-            z = -y0 * sin_k[k] + z0 * cos_k[k]
-            if abs(y) <= hy and z >= zlo and z <= zhi:
-                mask |= bit
-        if mask == target:
-            return target
+        if r2 <= reg[r, _RIN2]:
+            return todo  # inside the disc that the region covers at every roll
+        hy, zlo, zhi = reg[r, _HY], reg[r, _ZLO], reg[r, _ZHI]
+        left = todo & ~mask
+        if half > 0 and reg[r, _SYM] != 0.0:
+            # roll k + half turns (y, z) into (-y, -z) up to rounding of the tables: bounded by g
+            g = np.sqrt(r2) * gfac
+            for k in range(half):
+                b0 = np.uint64(1) << np.uint64(k)
+                b1 = np.uint64(1) << np.uint64(k + half)
+                if not (left & (b0 | b1)):
+                    continue
+                y = y0 * cos_k[k] + z0 * sin_k[k]
+                z = -y0 * sin_k[k] + z0 * cos_k[k]
+                ay = abs(y)
+                if ay <= hy and z >= zlo and z <= zhi:
+                    mask |= b0
+                if left & b1:
+                    if ay <= hy - g and z >= zlo + g and z <= zhi - g:
+                        mask |= b1
+                    elif ay > hy + g or z < zlo - g or z > zhi + g:
+                        pass
+                    else:
+                        k1 = k + half
+                        y1 = y0 * cos_k[k1] + z0 * sin_k[k1]
+                        z1 = -y0 * sin_k[k1] + z0 * cos_k[k1]
+                        if _in_rect(y1, z1, hy, zlo, zhi):
+                            mask |= b1
+        else:
+            for k in range(cos_k.shape[0]):
+                bit = np.uint64(1) << np.uint64(k)
+                if not (left & bit):
+                    continue
+                y = y0 * cos_k[k] + z0 * sin_k[k]
+                z = -y0 * sin_k[k] + z0 * cos_k[k]
+                if _in_rect(y, z, hy, zlo, zhi):
+                    mask |= bit
+        mask &= todo
+        if mask == todo:
+            return todo
     return mask
+
+
+@njit(cache=True, inline="always")
+def _popcount(v):
+    v = v - ((v >> np.uint64(1)) & np.uint64(0x5555555555555555))
+    v = (v & np.uint64(0x3333333333333333)) + ((v >> np.uint64(2)) & np.uint64(0x3333333333333333))
+    v = (v + (v >> np.uint64(4))) & np.uint64(0x0F0F0F0F0F0F0F0F)
+    return (v * np.uint64(0x0101010101010101)) >> np.uint64(56)
 
 
 @njit(cache=True)
 def _phase(
-    mid,
-    ax,
-    ay,
-    az,
-    yb,
-    zb,
-    P,
-    lo,
-    hi,
-    disc,
+    F,
+    X,
+    Y,
+    Z,
+    nodes,
     leaves,
-    leaf_size,
-    regions,
+    reg,
     r0,
     r1,
     xr,
     cos_k,
     sin_k,
-    psi,
+    half,
+    gfac,
     target,
-    angular,
+    finger,
     stack,
     cache,
     cache_pos,
+    st,
 ):
-    """Rolls within `target` blocked by regions r0..r1-1. With `angular` (the palm, which lies on one side of
-    the axis), a node is skipped when no target roll turns the region towards the node's angular sector."""
+    """Rolls within `target` blocked by regions r0..r1-1 (fingers: r0, r1 = 0, 2; palm: 2, 3)."""
+    n = X.shape[0]
     mask = np.uint64(0)
     for c in range(cache.shape[0]):
         p = cache[c]
         if p < 0:
             continue
-        mask |= _point_mask(
-            P[p, 0] - mid[0],
-            P[p, 1] - mid[1],
-            P[p, 2] - mid[2],
-            ax,
-            ay,
-            az,
-            yb,
-            zb,
-            regions,
-            r0,
-            r1,
-            xr,
-            cos_k,
-            sin_k,
-            target & ~mask,
-        )
+        st[4] += 1
+        mask |= _point_mask(X, Y, Z, p, F, reg, r0, r1, xr, cos_k, sin_k, half, gfac, target & ~mask)
         if mask == target:
+            st[5] += 1
             return mask, cache_pos
-    n = P.shape[0]
+    ax, ay, az = F[3], F[4], F[5]
+    ya, yb, yc = F[6], F[7], F[8]
+    za, zb, zc = F[9], F[10], F[11]
+    nrolls = cos_k.shape[0]
+    sym = half > 0 and reg[r0, _SYM] != 0.0
+    kmax = half if sym else nrolls
     stack[0] = 1
     top = 1
+    vis = 0 if finger else 2
     while top > 0:
         top -= 1
         node = stack[top]
-        if lo[node, 0] > hi[node, 0]:
-            continue  # empty padding
-        cx = 0.5 * (lo[node, 0] + hi[node, 0]) - mid[0]
-        cy = 0.5 * (lo[node, 1] + hi[node, 1]) - mid[1]
-        cz = 0.5 * (lo[node, 2] + hi[node, 2]) - mid[2]
-        hx_ = 0.5 * (hi[node, 0] - lo[node, 0])
-        hy_ = 0.5 * (hi[node, 1] - lo[node, 1])
-        hz_ = 0.5 * (hi[node, 2] - lo[node, 2])
+        st[vis] += 1
+        nd = nodes[node]
+        cx = nd[0] - F[0]
+        cy = nd[1] - F[1]
+        cz = nd[2] - F[2]
+        rho = nd[15]
         xc = cx * ax + cy * ay + cz * az
-        xh = hx_ * abs(ax) + hy_ * abs(ay) + hz_ * abs(az)
-        rho = np.sqrt(hx_ * hx_ + hy_ * hy_ + hz_ * hz_)
-        # the disc bound along the axis; keep the tighter of the two intervals
-        cn = disc[node, 3] * ax + disc[node, 4] * ay + disc[node, 5] * az
-        dxc = (disc[node, 0] - mid[0]) * ax + (disc[node, 1] - mid[1]) * ay + (disc[node, 2] - mid[2]) * az
-        dxh = disc[node, 6] * abs(cn) + disc[node, 7] * np.sqrt(max(1.0 - cn * cn, 0.0))
-        x_lo = max(xc - xh, dxc - dxh)
-        x_hi = min(xc + xh, dxc + dxh)
-        dp = np.sqrt(max(cx * cx + cy * cy + cz * cz - xc * xc, 0.0))
+        p0 = nd[3] * ax + nd[4] * ay + nd[5] * az
+        p1 = nd[6] * ax + nd[7] * ay + nd[8] * az
+        p2 = nd[9] * ax + nd[10] * ay + nd[11] * az
+        xh = min(nd[12] * abs(p0) + nd[13] * abs(p1) + nd[14] * abs(p2), rho)
+        x_lo = xc - xh
+        x_hi = xc + xh
+        yc0 = cx * ya + cy * yb + cz * yc
+        zc0 = cx * za + cy * zb + cz * zc
+        dp = np.sqrt(yc0 * yc0 + zc0 * zc0)
         hit = False
+        todo = target & ~mask
         for r in range(r0, r1):
             if x_hi < xr[r, 0] or x_lo > xr[r, 1]:
                 continue
-            if dp - rho > regions[r, 5] or dp + rho < regions[r, 4]:
+            if dp - rho > reg[r, _RMAX] or dp + rho < reg[r, _RMIN]:
                 continue
-            if x_lo >= xr[r, 0] and x_hi <= xr[r, 1] and dp + rho <= regions[r, 6]:
-                return target, cache_pos  # the node lies where every roll of this finger is
-            if angular:
-                # per roll: skip the node where its bounding sphere misses the rotated box; block the roll
-                # outright where the sphere lies inside it (every point of the node is then in the box)
-                y0 = cx * yb[0] + cy * yb[1] + cz * yb[2]
-                z0 = cx * zb[0] + cy * zb[1] + cz * zb[2]
-                hy, zlo, zhi = regions[r, 1], regions[r, 2], regions[r, 3]
-                x_in = x_lo >= xr[r, 0] and x_hi <= xr[r, 1]
-                todo = target & ~mask
-                reach = np.uint64(0)
-                for k in range(psi.shape[0]):
-                    bit = np.uint64(1) << np.uint64(k)
-                    if not (todo & bit):
-                        continue
-                    y = y0 * cos_k[k] + z0 * sin_k[k]
-                    z = -y0 * sin_k[k] + z0 * cos_k[k]
-                    if abs(y) > hy + rho or z < zlo - rho or z > zhi + rho:
-                        continue
-                    if x_in and abs(y) + rho <= hy and z - rho >= zlo and z + rho <= zhi:
-                        mask |= bit
-                    else:
-                        reach |= bit
+            x_in = x_lo >= xr[r, 0] and x_hi <= xr[r, 1]
+            if x_in and dp + rho <= reg[r, _RIN]:
+                return target, cache_pos  # the node lies where every roll of this region is
+            angular = True
+            if finger:
+                open_ = todo
+                if sym:
+                    open_ = (todo | (todo >> np.uint64(half))) & ((np.uint64(1) << np.uint64(half)) - np.uint64(1))
+                angular = _popcount(open_) <= _FINGER_ANGULAR
+            if not angular:
+                hit = True
+                break
+            # per open roll: the node's oriented box projected onto the roll's Y and Z axes
+            hy, zlo, zhi = reg[r, _HY], reg[r, _ZLO], reg[r, _ZHI]
+            q0y = nd[3] * ya + nd[4] * yb + nd[5] * yc
+            q1y = nd[6] * ya + nd[7] * yb + nd[8] * yc
+            q2y = nd[9] * ya + nd[10] * yb + nd[11] * yc
+            q0z = nd[3] * za + nd[4] * zb + nd[5] * zc
+            q1z = nd[6] * za + nd[7] * zb + nd[8] * zc
+            q2z = nd[9] * za + nd[10] * zb + nd[11] * zc
+            reach = np.uint64(0)
+            inside = np.uint64(0)
+            for k in range(kmax):
+                bit = np.uint64(1) << np.uint64(k)
+                if sym:
+                    bit |= np.uint64(1) << np.uint64(k + half)
+                if not (todo & bit):
+                    continue
+                ck, sk = cos_k[k], sin_k[k]
+                yk = ck * yc0 + sk * zc0
+                zk = -sk * yc0 + ck * zc0
+                eh = min(
+                    nd[12] * abs(ck * q0y + sk * q0z)
+                    + nd[13] * abs(ck * q1y + sk * q1z)
+                    + nd[14] * abs(ck * q2y + sk * q2z),
+                    rho,
+                )
+                ev = min(
+                    nd[12] * abs(ck * q0z - sk * q0y)
+                    + nd[13] * abs(ck * q1z - sk * q1y)
+                    + nd[14] * abs(ck * q2z - sk * q2y),
+                    rho,
+                )
+                if abs(yk) - eh > hy or zk + ev < zlo or zk - ev > zhi:
+                    continue
+                if x_in and abs(yk) + eh <= hy and zk - ev >= zlo and zk + ev <= zhi:
+                    inside |= bit
+                else:
+                    reach |= bit
+            if inside:
+                mask |= inside & target
                 if mask == target:
                     return mask, cache_pos
-                if not reach:
-                    continue
-            hit = True
-            break
+                todo = target & ~mask
+            if reach & todo:
+                hit = True
+                break
         if not hit:
             continue
         if node >= leaves:
-            first = (node - leaves) * leaf_size
-            for p in range(first, min(first + leaf_size, n)):
-                m = _point_mask(
-                    P[p, 0] - mid[0],
-                    P[p, 1] - mid[1],
-                    P[p, 2] - mid[2],
-                    ax,
-                    ay,
-                    az,
-                    yb,
-                    zb,
-                    regions,
-                    r0,
-                    r1,
-                    xr,
-                    cos_k,
-                    sin_k,
-                    target & ~mask,
-                )
+            leaf = node - leaves
+            first = (leaf * n) // leaves
+            last = ((leaf + 1) * n) // leaves
+            for p in range(first, last):
+                st[vis + 1] += 1
+                m = _point_mask(X, Y, Z, p, F, reg, r0, r1, xr, cos_k, sin_k, half, gfac, target & ~mask)
                 if m:
                     mask |= m
                     cache[cache_pos] = p
@@ -383,146 +436,159 @@ def _phase(
     return mask, cache_pos
 
 
-@njit(cache=True)
-def _candidate(
-    mid,
-    ax,
-    ay,
-    az,
-    w,
-    kind_inside,
-    P,
-    lo,
-    hi,
-    disc,
-    leaves,
-    leaf_size,
-    regions,
-    model_f,
-    cos_k,
-    sin_k,
-    psi,
-    full,
-    switch,
-    stack,
-    caches,
-    cache_pos,
-):
-    yx, yy, yz, zx, zy, zz = _basis(ax, ay, az, switch)
-    yb = (yx, yy, yz)
-    zb = (zx, zy, zz)
-    xr = _x_ranges(regions, kind_inside, w, model_f)
-    # the fingers first: small regions, and they settle most candidates
-    blocked, cache_pos[0] = _phase(
-        mid,
-        ax,
-        ay,
-        az,
-        yb,
-        zb,
-        P,
-        lo,
-        hi,
-        disc,
-        leaves,
-        leaf_size,
-        regions,
-        0,
-        2,
-        xr,
-        cos_k,
-        sin_k,
-        psi,
-        full,
-        False,
-        stack,
-        caches[0],
-        cache_pos[0],
-    )
-    if blocked != full and regions.shape[0] > 2:
-        more, cache_pos[1] = _phase(
-            mid,
-            ax,
-            ay,
-            az,
-            yb,
-            zb,
-            P,
-            lo,
-            hi,
-            disc,
-            leaves,
-            leaf_size,
-            regions,
-            2,
-            regions.shape[0],
-            xr,
-            cos_k,
-            sin_k,
-            psi,
-            full & ~blocked,
-            True,
-            stack,
-            caches[1],
-            cache_pos[1],
-        )
-        blocked |= more
-    return blocked
-
-
 @njit(parallel=True, cache=True)
 def _free_rolls_kernel(
     mids,
     axes,
     widths,
     inside,
-    P,
-    lo,
-    hi,
-    disc,
+    X,
+    Y,
+    Z,
+    nodes,
     leaves,
-    leaf_size,
-    regions,
+    reg,
     model_f,
     cos_k,
     sin_k,
-    psi,
+    half,
+    gfac,
     full,
     switch,
     out,
+    stats,
 ):
     m = mids.shape[0]
     nchunks = (m + _CHUNK - 1) // _CHUNK
+    nr = reg.shape[0]
     for c in prange(nchunks):
         stack = np.empty(128, dtype=np.int64)
         caches = np.full((2, _CACHE), -1, dtype=np.int64)  # recent blockers: fingers, palm
         cache_pos = np.zeros(2, dtype=np.int64)
+        F = np.empty(12)
+        xr = np.empty((nr, 2))
+        for r in range(2, nr):
+            xr[r, 0] = -reg[r, _PX]
+            xr[r, 1] = reg[r, _PX]
+        st = stats[c]
         for q in range(c * _CHUNK, min((c + 1) * _CHUNK, m)):
-            blocked = _candidate(
-                mids[q],
-                axes[q, 0],
-                axes[q, 1],
-                axes[q, 2],
-                widths[q],
-                inside[q],
-                P,
-                lo,
-                hi,
-                disc,
+            ax, ay, az = axes[q, 0], axes[q, 1], axes[q, 2]
+            yx, yy, yz, zx, zy, zz = _basis(ax, ay, az, switch)
+            F[0], F[1], F[2] = mids[q, 0], mids[q, 1], mids[q, 2]
+            F[3], F[4], F[5] = ax, ay, az
+            F[6], F[7], F[8] = yx, yy, yz
+            F[9], F[10], F[11] = zx, zy, zz
+            _x_ranges(xr, inside[q], widths[q], model_f)
+            # the fingers first: small regions, and they settle most candidates
+            blocked, cache_pos[0] = _phase(
+                F,
+                X,
+                Y,
+                Z,
+                nodes,
                 leaves,
-                leaf_size,
-                regions,
-                model_f,
+                reg,
+                0,
+                2,
+                xr,
                 cos_k,
                 sin_k,
-                psi,
+                half,
+                gfac,
                 full,
-                switch,
+                True,
                 stack,
-                caches,
-                cache_pos,
+                caches[0],
+                cache_pos[0],
+                st,
             )
+            if blocked != full and nr > 2:
+                more, cache_pos[1] = _phase(
+                    F,
+                    X,
+                    Y,
+                    Z,
+                    nodes,
+                    leaves,
+                    reg,
+                    2,
+                    nr,
+                    xr,
+                    cos_k,
+                    sin_k,
+                    half,
+                    gfac,
+                    full & ~blocked,
+                    False,
+                    stack,
+                    caches[1],
+                    cache_pos[1],
+                    st,
+                )
+                blocked |= more
             out[q] = ~blocked & full
+
+
+def _prepare(points, normals, model, rolls):
+    """Tree, region constants and roll tables shared by free_rolls and the counting variant."""
+    from .transforms import roll_angles_rad
+
+    P = np.ascontiguousarray(points, dtype=np.float64)
+    n = len(P)
+    leaves = 1 << max(int(np.ceil(np.log2(max((n + _LEAF - 1) // _LEAF, 1)))), 0)
+    span = float(np.max(P.max(axis=0) - P.min(axis=0))) if n else 0.0
+    pad = 1e-9 * span + 1e-15
+    perm, nodes = _build_tree(P, leaves, pad)
+    Ps = P[perm]
+    psi = roll_angles_rad(rolls)
+    cos_k, sin_k = np.cos(psi), np.sin(psi)
+    half = rolls // 2 if rolls % 2 == 0 else 0
+    gfac = 0.0
+    if half:
+        asym = max(
+            float(np.max(np.abs(cos_k[half:] + cos_k[:half]))), float(np.max(np.abs(sin_k[half:] + sin_k[:half])))
+        )
+        # |y(k + half) + y(k)| <= (|y0| + |z0|) asym + rounding <= r (2 asym + 16 eps), doubled for safety
+        gfac = 2.0 * (2.0 * asym + 16.0 * np.finfo(np.float64).eps)
+    full = np.uint64((1 << rolls) - 1) if rolls < 64 else np.uint64(0xFFFFFFFFFFFFFFFF)
+    model_f = np.array([model.finger_thickness, model.stroke, model.min_width, model.clearance, model.inner_margin])
+    soa = tuple(np.ascontiguousarray(Ps[:, k]) for k in range(3))
+    return soa, nodes, leaves, _regions(model), model_f, cos_k, sin_k, half, gfac, full
+
+
+def _run(points, normals, midpoints, axes, widths, inside, model, rolls):
+    from .transforms import ROLL_REFERENCE_SWITCH
+
+    if not 1 <= rolls <= MAX_ROLLS:
+        raise ValueError(f"rolls must be 1..{MAX_ROLLS}")
+    m = len(midpoints)
+    stats = np.zeros(((m + _CHUNK - 1) // _CHUNK, _STATS), dtype=np.int64)
+    if m == 0 or len(points) == 0:
+        return np.ones((m, rolls), dtype=bool), stats
+    soa, nodes, leaves, reg, model_f, cos_k, sin_k, half, gfac, full = _prepare(points, normals, model, rolls)
+    out = np.zeros(m, dtype=np.uint64)
+    with numba.parallel_chunksize(1):
+        _free_rolls_kernel(
+            np.ascontiguousarray(midpoints, dtype=np.float64),
+            np.ascontiguousarray(axes, dtype=np.float64),
+            np.ascontiguousarray(widths, dtype=np.float64),
+            np.ascontiguousarray(inside, dtype=np.bool_),
+            *soa,
+            nodes,
+            leaves,
+            reg,
+            model_f,
+            cos_k,
+            sin_k,
+            half,
+            gfac,
+            full,
+            ROLL_REFERENCE_SWITCH,
+            out,
+            stats,
+        )
+    bits = (out[:, None] >> np.arange(rolls, dtype=np.uint64)[None, :]) & np.uint64(1)
+    return bits.astype(bool), stats
 
 
 def free_rolls(
@@ -537,46 +603,16 @@ def free_rolls(
 ) -> np.ndarray:
     """Collision-free rolls of each candidate: (m, rolls) bool.
 
-    points, normals: (n, 3) the sampled surface, metres, and its unit normals (they only tighten bounds);
-    midpoints (m, 3); axes (m, 3) unit, contact 0 -> 1;
+    points, normals: (n, 3) the sampled surface, metres, and its unit normals (unused by the exact test; kept
+    for the interface); midpoints (m, 3); axes (m, 3) unit, contact 0 -> 1;
     widths (m,) contact distances; inside (m,) bool. Roll k is the angle 2 pi k / rolls (CONTRACT.md).
     """
-    from .transforms import ROLL_REFERENCE_SWITCH, roll_angles_rad
+    return _run(points, normals, midpoints, axes, widths, inside, model, rolls)[0]
 
-    if not 1 <= rolls <= MAX_ROLLS:
-        raise ValueError(f"rolls must be 1..{MAX_ROLLS}")
-    m = len(midpoints)
-    if m == 0 or len(points) == 0:
-        return np.ones((m, rolls), dtype=bool)
-    order = _morton_order(points)
-    P = np.ascontiguousarray(points[order], dtype=np.float64)
-    n_leaves = (len(P) + _LEAF - 1) // _LEAF
-    leaves = 1 << max(int(np.ceil(np.log2(max(n_leaves, 1)))), 0)
-    lo, hi, disc = _build_bvh(P, np.ascontiguousarray(normals[order], dtype=np.float64), leaves, _LEAF)
-    psi = roll_angles_rad(rolls)
-    full = np.uint64((1 << rolls) - 1) if rolls < 64 else np.uint64(0xFFFFFFFFFFFFFFFF)
-    model_f = np.array([model.finger_thickness, model.stroke, model.min_width, model.clearance, model.inner_margin])
-    out = np.zeros(m, dtype=np.uint64)
-    with numba.parallel_chunksize(1):
-        _free_rolls_kernel(
-            np.ascontiguousarray(midpoints, dtype=np.float64),
-            np.ascontiguousarray(axes, dtype=np.float64),
-            np.ascontiguousarray(widths, dtype=np.float64),
-            np.ascontiguousarray(inside, dtype=np.bool_),
-            P,
-            lo,
-            hi,
-            disc,
-            leaves,
-            _LEAF,
-            _regions(model),
-            model_f,
-            np.cos(psi),
-            np.sin(psi),
-            psi,
-            full,
-            ROLL_REFERENCE_SWITCH,
-            out,
-        )
-    bits = (out[:, None] >> np.arange(rolls, dtype=np.uint64)[None, :]) & np.uint64(1)
-    return bits.astype(bool)
+
+def free_rolls_stats(points, normals, midpoints, axes, widths, inside, model, rolls):
+    """free_rolls and its work counters, summed over candidates: finger node visits, finger point tests, palm
+    node visits, palm point tests, cached-blocker tests, phases settled by the finger cache alone."""
+    fr, stats = _run(points, normals, midpoints, axes, widths, inside, model, rolls)
+    names = ("finger_nodes", "finger_points", "palm_nodes", "palm_points", "cache_tests", "cache_settled", "_6", "_7")
+    return fr, {k: int(v) for k, v in zip(names, stats.sum(axis=0), strict=True) if not k.startswith("_")}

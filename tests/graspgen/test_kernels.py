@@ -11,7 +11,10 @@ import trimesh
 from graspgen.antipodal import antipodal_pairs, cone_half_angle_rad, friction_margin_deg, grid_order
 from graspgen.collision import collision_model, free_rolls
 from graspgen.gripper import GripperSpec
+from graspgen.params import TOLERANCES
+from graspgen.transforms import roll_angles_rad
 
+from ..conftest import SHARED_MESHES
 from . import reference as ref
 
 GRIPPER = GripperSpec(
@@ -175,3 +178,92 @@ def test_paper_and_swept_differ_where_the_opening_hits_a_wall():
     swept = free_rolls(pts, nrm, mids, axes, w, inside, collision_model(g, "swept"), 16).any(1)
     assert not np.any(swept & ~paper)  # swept only adds volume
     assert np.sum(paper & ~swept) > 0
+
+
+def _face_offsets(rolls: int, w: float, every: int) -> np.ndarray:
+    """Grasp-frame positions (candidate closing along +x at the origin, so that Y0 = +y and Z0 = +z) on the
+    faces of the finger and palm boxes at the rolls k = 0, every, 2 every, .., and an ulp either side. One of the
+    y, z coordinates is zero, so the reference's matrix product rounds exactly like the kernel. Among them are
+    points that one roll counts as inside and the opposite roll (half a turn on) as outside, although the finger
+    box is symmetric."""
+    psi = roll_angles_rad(rolls)
+    c, s = np.cos(psi), np.sin(psi)
+    hy, hz = GRIPPER.finger_width / 2, GRIPPER.finger_depth / 2
+    z_hi = -hz
+    z_lo = z_hi - GRIPPER.palm_depth
+    a = w / 2 + TOLERANCES.inner_margin
+    b = min(w + GRIPPER.pregrasp_clearance, GRIPPER.stroke) / 2 + GRIPPER.finger_thickness
+    out = []
+    for k in range(0, rolls, every):
+        for face in (hy, hz, -z_lo, -z_hi):
+            for trig in (c[k], s[k]):
+                if abs(trig) < 1e-3:
+                    continue
+                r = face / abs(trig)
+                for v in (np.nextafter(r, 0.0), r, np.nextafter(r, 1.0)):
+                    for x in (a, -b, 0.0):
+                        for sign in (1.0, -1.0):
+                            out.append([x, sign * v, 0.0])
+                            out.append([x, 0.0, sign * v])
+    return np.array(out)
+
+
+@pytest.mark.parametrize("rolls, every", [(16, 1), (64, 8)])
+@pytest.mark.parametrize("mode", ["swept", "paper"])
+def test_free_rolls_exact_on_box_faces(mode, rolls, every):
+    """Ties decide like the per-roll test: the half-turn symmetry and the node bounds never round differently.
+
+    One sample point at the origin and one candidate per offset q, at midpoint -q (so that point - midpoint is
+    exactly q)."""
+    w = 0.03
+    q = _face_offsets(rolls, w, every)
+    pts = np.zeros((1, 3))
+    mids, axes = -q, np.tile([1.0, 0.0, 0.0], (len(q), 1))
+    widths, inside = np.full(len(q), w), np.zeros(len(q), bool)
+    got = free_rolls(pts, pts, mids, axes, widths, inside, collision_model(GRIPPER, mode), rolls)
+    expect = ref.free_rolls(pts, mids, axes, widths, inside, GRIPPER, mode, rolls)
+    assert np.array_equal(got, expect)
+    # the sample holds points on both sides of the faces
+    assert expect.any() and not expect.all()
+    # and points that the two halves of a symmetric pair of rolls judge differently
+    h = rolls // 2
+    assert np.any(expect[:, :h] != expect[:, h:])
+
+
+def _larger_parts():
+    parts = {"ring64": trimesh.creation.annulus(r_min=0.01, r_max=0.03, height=0.02, sections=64)}
+    path = SHARED_MESHES / "tless_04.stl"
+    if path.is_file():
+        mesh = trimesh.load(path, force="mesh")
+        mesh.apply_scale(0.001)  # mm
+        parts["tless_04"] = mesh
+    return parts
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mode", ["swept", "paper"])
+@pytest.mark.parametrize("name", ["ring64", "tless_04"])
+def test_free_rolls_equal_reference_on_larger_samples(name, mode):
+    """4000 points, every kind of outcome: ~1600 candidates checked against the brute-force reference."""
+    parts = _larger_parts()
+    if name not in parts:
+        pytest.skip(f"{name} not available (shared meshes missing)")
+    pts, nrm = _sample(parts[name], 4000, seed=3)
+    pts, nrm = pts[grid_order(pts, 0.04)], nrm[grid_order(pts, 0.04)]
+    mids, axes, w, inside = _candidates(pts, nrm)
+    fr = free_rolls(pts, nrm, mids, axes, w, inside, collision_model(GRIPPER, mode), 16)
+    n_free = fr.sum(1)
+    rng = np.random.default_rng(5)
+
+    def some(mask, k):
+        idx = np.nonzero(mask)[0]
+        return rng.choice(idx, min(k, len(idx)), replace=False)
+
+    sel = np.unique(
+        np.concatenate(
+            [some(np.ones(len(fr), bool), 500), some(n_free == 1, 300), some(n_free >= 8, 300), some(n_free == 0, 300)]
+        )
+    )
+    expect = ref.free_rolls(pts, mids[sel], axes[sel], w[sel], inside[sel], GRIPPER, mode, 16)
+    assert np.array_equal(fr[sel], expect)
+    assert ((expect.sum(1) > 0) & (expect.sum(1) < 16)).any() and expect.any() and not expect.all()
