@@ -3,10 +3,10 @@
     .venv/bin/python bench/bench_service.py [--grasp-sets 1000] [--rate 200] [--seconds 10]
                                             [--points 10000] [--bulk 50] [--bulk-points 2000] [--skip ...]
 
-1. catalogue: `graspgen serve` (uvicorn, one process) on PostgreSQL with `--grasp-sets` objects, each with one grasp
-   set for one gripper (rows and export blobs written directly; the exports are a real export renamed). An open-loop
-   client sends `--rate` requests/s for `--seconds` s (bounded count), half `GET /v1/catalogue/{object}/{gripper}`
-   (a random object), half `GET /v1/catalogue?gripper=` pages; latency p50/p99 per kind.
+1. catalogue: `graspgen serve --workers N` (`--web-workers` uvicorn processes, default 2) on PostgreSQL with
+   `--grasp-sets` objects, each with one grasp set for one gripper (rows and export blobs written directly; the exports are a real export renamed). An open-loop
+   client sends `--rate` requests/s for `--seconds` s (bounded count) of `GET /v1/catalogue/{object}/{gripper}`
+   (a random object), then `--page-rate` requests/s of `GET /v1/catalogue?gripper=` pages (fleet sync); p50/p99.
 2. job: time from `POST /v1/jobs` to the job's grasp set being stored (state succeeded), a `--points` job on the
    shipped-size example (a 24 mm x 30 mm cylinder), one warm Celery worker (a small job ran first to compile kernels).
 3. bulk: jobs per minute through two `graspgen worker` processes for a bulk job of `--bulk` parts at `--bulk-points`.
@@ -38,8 +38,16 @@ sys.path.insert(0, str(ROOT))
 
 PG_URL = os.environ.get("GRASPGEN_BENCH_PG_URL", "postgresql+psycopg://postgres@127.0.0.1:5432/test")
 REDIS_URL = os.environ.get("GRASPGEN_BENCH_REDIS_URL", "redis://127.0.0.1:6379/15")
-GRIPPER = {"name": "pgn-80", "stroke": 0.08, "finger_width": 0.02, "finger_depth": 0.03, "finger_thickness": 0.01,
-           "palm_depth": 0.02, "friction": 0.5, "pregrasp_clearance": 0.02}
+GRIPPER = {
+    "name": "pgn-80",
+    "stroke": 0.08,
+    "finger_width": 0.02,
+    "finger_depth": 0.03,
+    "finger_thickness": 0.01,
+    "palm_depth": 0.02,
+    "friction": 0.5,
+    "pregrasp_clearance": 0.02,
+}
 
 
 def _free_port() -> int:
@@ -79,11 +87,16 @@ class Stack:
         self.token = "ggt_bench_" + secrets.token_urlsafe(16)
         from services.common.tokens import hash_token
 
-        (tmp / "tokens.json").write_text(json.dumps(
-            {"tokens": [{"name": "bench", "sha256": hash_token(self.token), "scopes": ["admin"]}]}))
+        (tmp / "tokens.json").write_text(
+            json.dumps({"tokens": [{"name": "bench", "sha256": hash_token(self.token), "scopes": ["admin"]}]})
+        )
         self.values = {
-            "database_url": PG_URL, "database_schema": self.schema, "broker_url": REDIS_URL,
-            "broker_key_prefix": self.prefix, "queue": self.prefix.rstrip(":"), "storage_dir": tmp / "var",
+            "database_url": PG_URL,
+            "database_schema": self.schema,
+            "broker_url": REDIS_URL,
+            "broker_key_prefix": self.prefix,
+            "queue": self.prefix.rstrip(":"),
+            "storage_dir": tmp / "var",
             "tokens_file": tmp / "tokens.json",
         }
         self.procs: list[subprocess.Popen] = []
@@ -101,8 +114,12 @@ class Stack:
 
     def start(self, *args: str, log: str, log_level: str = "info") -> subprocess.Popen:
         with open(self.tmp / log, "wb") as out:
-            p = subprocess.Popen([sys.executable, "-m", "services.cli", *args], env=self.env(log_level), stdout=out,
-                                 stderr=subprocess.STDOUT)
+            p = subprocess.Popen(
+                [sys.executable, "-m", "services.cli", *args],
+                env=self.env(log_level),
+                stdout=out,
+                stderr=subprocess.STDOUT,
+            )
         self.procs.append(p)
         return p
 
@@ -113,9 +130,11 @@ class Stack:
                 raise TimeoutError(f"{needle!r} not in {log}")
             time.sleep(0.1)
 
-    def serve(self) -> str:
+    def serve(self, workers: int = 1) -> str:
         port = _free_port()
-        self.start("serve", "--port", str(port), log="serve.log", log_level="warning")  # no access log
+        self.start(
+            "serve", "--port", str(port), "--workers", str(workers), log="serve.log", log_level="warning"
+        )  # warning: no access log
         url = f"http://127.0.0.1:{port}"
         end = time.monotonic() + 60
         while True:
@@ -166,53 +185,80 @@ def seed_catalogue(stack: Stack, n: int, export: dict) -> list[str]:
             o = ObjectModel(name=name)
             s.add(o)
             s.flush()
-            ov = ObjectVersion(object_id=o.id, version=1, sha256=part.sha256, units="mm", format="stl",
-                               size_bytes=part.size, extents=[0.03, 0.02, 0.015], watertight=True, warnings=[],
-                               file_key=part.key)
+            ov = ObjectVersion(
+                object_id=o.id,
+                version=1,
+                sha256=part.sha256,
+                units="mm",
+                format="stl",
+                size_bytes=part.size,
+                extents=[0.03, 0.02, 0.015],
+                watertight=True,
+                warnings=[],
+                file_key=part.key,
+            )
             s.add(ov)
             s.flush()
             blob = storage.put_bytes(canonical_json({**export, "object": {**export["object"], "name": name}}))
-            s.execute(insert(GraspSet), [dict(
-                object_id=o.id, gripper_id=g.id, version=1, object_version_id=ov.id, gripper_version_id=gv.id,
-                params=export["params"], params_key=params_key(export["params"], None), derived_from_id=None,
-                job_id=uuid.uuid4(), stats=export["stats"], grasp_count=len(export["grasps"]),
-                export_key=blob.key, export_sha256=blob.sha256, export_size=blob.size,
-                candidates_key=None, recording_key=None)])
+            s.execute(
+                insert(GraspSet),
+                [
+                    dict(
+                        object_id=o.id,
+                        gripper_id=g.id,
+                        version=1,
+                        object_version_id=ov.id,
+                        gripper_version_id=gv.id,
+                        params=export["params"],
+                        params_key=params_key(export["params"], None),
+                        derived_from_id=None,
+                        job_id=uuid.uuid4(),
+                        stats=export["stats"],
+                        grasp_count=len(export["grasps"]),
+                        export_key=blob.key,
+                        export_sha256=blob.sha256,
+                        export_size=blob.size,
+                        candidates_key=None,
+                        recording_key=None,
+                    )
+                ],
+            )
     db.dispose()
     return names
 
 
-async def open_loop(url: str, token: str, names: list[str], rate: float, seconds: float) -> dict[str, list[float]]:
-    """Requests at a fixed rate whatever the latency (open loop), at most rate*seconds of them."""
-    lat: dict[str, list[float]] = {"entry": [], "page": [], "errors": []}
+async def open_loop(url: str, token: str, paths: list[str], rate: float, seconds: float) -> tuple[list[float], int]:
+    """GETs at a fixed rate whatever the latency (open loop), at most rate*seconds of them; (latencies ms, errors)."""
+    lat: list[float] = []
+    errors = 0
     headers = {"Authorization": f"Bearer {token}"}
     limits = httpx.Limits(max_connections=64, max_keepalive_connections=64)
-    async with httpx.AsyncClient(base_url=url, headers=headers, limits=limits, timeout=10) as c:
+    async with httpx.AsyncClient(base_url=url, headers=headers, limits=limits, timeout=30) as c:
 
-        async def one(i: int) -> None:
-            kind = "entry" if i % 2 == 0 else "page"
-            path = (f"/v1/catalogue/{random.choice(names)}/pgn-80" if kind == "entry"
-                    else "/v1/catalogue?gripper=pgn-80&limit=50")
+        async def one(path: str, keep: bool) -> None:
+            nonlocal errors
             t0 = time.perf_counter()
             try:
-                r = await c.get(path)
-                ok = r.status_code == 200
+                ok = (await c.get(path)).status_code == 200
             except httpx.HTTPError:
                 ok = False
-            (lat[kind] if ok else lat["errors"]).append((time.perf_counter() - t0) * 1e3)
+            if keep:
+                if ok:
+                    lat.append((time.perf_counter() - t0) * 1e3)
+                else:
+                    errors += 1
 
-        for i in range(20):  # warm connections and caches
-            await one(i)
-        lat = {"entry": [], "page": [], "errors": []}
+        for i in range(20):  # open connections, warm caches
+            await one(paths[i % len(paths)], False)
         tasks = []
         start = time.perf_counter()
         for i in range(int(rate * seconds)):
             delay = start + i / rate - time.perf_counter()
             if delay > 0:
                 await asyncio.sleep(delay)
-            tasks.append(asyncio.create_task(one(i)))
+            tasks.append(asyncio.create_task(one(random.choice(paths), True)))
         await asyncio.gather(*tasks)
-    return lat
+    return lat, errors
 
 
 def submit_and_wait(c: httpx.Client, body: dict, timeout: float, path: str = "/v1/jobs") -> tuple[dict, float]:
@@ -233,9 +279,11 @@ def main() -> int:
     ap.add_argument("--grasp-sets", type=int, default=1000)
     ap.add_argument("--rate", type=float, default=200.0)
     ap.add_argument("--seconds", type=float, default=10.0)
+    ap.add_argument("--page-rate", type=float, default=20.0, help="requests/s for catalogue pages (fleet sync)")
     ap.add_argument("--points", type=int, default=10_000)
     ap.add_argument("--bulk", type=int, default=50)
     ap.add_argument("--bulk-points", type=int, default=2000)
+    ap.add_argument("--web-workers", type=int, default=2, help="API processes (graspgen serve --workers)")
     ap.add_argument("--timeout", type=float, default=600.0, help="per job or bulk, seconds")
     ap.add_argument("--skip", nargs="*", default=[], choices=["catalogue", "job", "bulk"])
     args = ap.parse_args()
@@ -243,26 +291,35 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="graspgen-bench-") as tmp:
         stack = Stack(Path(tmp))
         try:
-            url = stack.serve()
+            url = stack.serve(args.web_workers)
             c = httpx.Client(base_url=url, headers={"Authorization": f"Bearer {stack.token}"}, timeout=30)
             c.post("/v1/grippers", json=GRIPPER).raise_for_status()
-            c.post("/v1/objects", files={"file": ("ring.stl", _cylinder_stl())},
-                   data={"name": "ring", "units": "mm"}).raise_for_status()
+            c.post(
+                "/v1/objects", files={"file": ("ring.stl", _cylinder_stl())}, data={"name": "ring", "units": "mm"}
+            ).raise_for_status()
             stack.start("worker", "--concurrency", "1", log="worker1.log")
             stack.wait_log("worker1.log", " ready.")
-            warm, warm_s = submit_and_wait(c, {"object": "ring", "gripper": "pgn-80", "params": {"points": 500}},
-                                           args.timeout)
+            warm, warm_s = submit_and_wait(
+                c, {"object": "ring", "gripper": "pgn-80", "params": {"points": 500}}, args.timeout
+            )
             print(f"warm-up job ({warm['state']}): {warm_s:.2f} s (includes compiling kernels in the worker)")
             export = c.get(f"/v1/grasp-sets/{warm['grasp_set']}").json()
             rows = []
 
             if "job" not in args.skip:
                 job, secs = submit_and_wait(
-                    c, {"object": "ring", "gripper": "pgn-80", "params": {"points": args.points}}, args.timeout)
+                    c, {"object": "ring", "gripper": "pgn-80", "params": {"points": args.points}}, args.timeout
+                )
                 stats = c.get(f"/v1/grasp-sets/{job['grasp_set']}").json()["stats"] if job["grasp_set"] else {}
                 core = stats.get("timings_s", {}).get("total")
-                rows.append(("job submission -> stored grasp set", f"{args.points} points", f"{secs:.2f} s",
-                             f"state {job['state']}, core total {core:.2f} s" if core else job["state"]))
+                rows.append(
+                    (
+                        "job submission -> stored grasp set",
+                        f"{args.points} points",
+                        f"{secs:.2f} s",
+                        f"state {job['state']}, core total {core:.2f} s" if core else job["state"],
+                    )
+                )
 
             if "bulk" not in args.skip:
                 stack.start("worker", "--concurrency", "1", log="worker2.log")
@@ -272,26 +329,41 @@ def main() -> int:
                 names = []
                 for i in range(args.bulk):
                     name = f"bulk-part-{i:03d}"
-                    c.post("/v1/objects", files={"file": (f"{name}.stl", _box_stl(i))},
-                           data={"name": name, "units": "mm"}).raise_for_status()
+                    c.post(
+                        "/v1/objects", files={"file": (f"{name}.stl", _box_stl(i))}, data={"name": name, "units": "mm"}
+                    ).raise_for_status()
                     names.append(name)
                 items = [{"object": n, "gripper": "pgn-80", "params": {"points": args.bulk_points}} for n in names]
                 parent, secs = submit_and_wait(c, {"items": items}, args.timeout, path="/v1/bulk-jobs")
                 done = parent["summary"]["succeeded"]
-                rows.append(("bulk, two workers", f"{args.bulk} parts x {args.bulk_points} points",
-                             f"{secs:.1f} s", f"{done / secs * 60:.1f} jobs/min ({parent['summary']})"))
+                rows.append(
+                    (
+                        "bulk, two workers",
+                        f"{args.bulk} parts x {args.bulk_points} points",
+                        f"{secs:.1f} s",
+                        f"{done / secs * 60:.1f} jobs/min ({parent['summary']})",
+                    )
+                )
 
             if "catalogue" not in args.skip:
                 t0 = time.perf_counter()
                 names = seed_catalogue(stack, args.grasp_sets, export)
                 print(f"seeded {len(names)} grasp sets in {time.perf_counter() - t0:.1f} s")
-                lat = asyncio.run(open_loop(url, stack.token, names, args.rate, args.seconds))
-                for kind, label in (("entry", "GET /v1/catalogue/{object}/{gripper}"),
-                                    ("page", "GET /v1/catalogue?gripper= (50 per page)")):
-                    v = lat[kind]
-                    rows.append((label, f"{args.rate:.0f} req/s total, {len(v)} requests",
-                                 f"p50 {_pct(v, 50):.1f} ms, p99 {_pct(v, 99):.1f} ms",
-                                 f"mean {statistics.fmean(v):.1f} ms, max {max(v):.1f} ms, errors {len(lat['errors'])}"))
+                entries = [f"/v1/catalogue/{n}/pgn-80" for n in names]
+                pages = ["/v1/catalogue?gripper=pgn-80&limit=50"]
+                for label, paths, rate in (
+                    ("GET /v1/catalogue/{object}/{gripper}", entries, args.rate),
+                    ("GET /v1/catalogue?gripper= (first page of 50)", pages, args.page_rate),
+                ):
+                    v, errors = asyncio.run(open_loop(url, stack.token, paths, rate, args.seconds))
+                    rows.append(
+                        (
+                            label,
+                            f"{rate:.0f} req/s, {len(v)} requests, {args.web_workers} API processes",
+                            f"p50 {_pct(v, 50):.1f} ms, p99 {_pct(v, 99):.1f} ms",
+                            f"mean {statistics.fmean(v):.1f} ms, max {max(v):.1f} ms, errors {errors}",
+                        )
+                    )
 
             print()
             print("| measurement | load | result | notes |")

@@ -23,6 +23,7 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("serve", help="run the HTTP API (embedded database and worker unless configured)")
     s.add_argument("--host", default=None, help="bind address (default GRASPGEN_HOST or 127.0.0.1)")
     s.add_argument("--port", type=int, default=None, help="port (default GRASPGEN_PORT or 8000)")
+    s.add_argument("--workers", type=int, default=None, help="API processes (default GRASPGEN_WEB_WORKERS or 1)")
     w = sub.add_parser("worker", help="run a Celery worker for the configured broker")
     w.add_argument(
         "--concurrency", type=int, default=None, help="worker processes (default GRASPGEN_WORKER_CONCURRENCY)"
@@ -74,19 +75,30 @@ def _serve(args: argparse.Namespace) -> int:
 
     from services.api.app import create_app
 
+    workers = args.workers or settings.web_workers
+    if workers > 1 and settings.embedded_worker:
+        print(
+            "graspgen: --workers above 1 needs GRASPGEN_BROKER_URL (in-process jobs would run once per process)",
+            file=sys.stderr,
+        )
+        return 2
     try:
-        app = create_app(settings)
+        app = create_app(settings)  # also checks the tokens file before any worker process starts
     except TokensFileError as exc:
         print(f"graspgen: {exc}", file=sys.stderr)
         return 2
-    uvicorn.run(
-        app,
+    options = dict(
         host=args.host or settings.host,
         port=args.port or settings.port,
         log_level=settings.log_level,
         log_config=None,
         server_header=False,
     )
+    if workers > 1:
+        # each process builds its own app from the same environment
+        uvicorn.run("services.api.app:create_app", factory=True, workers=workers, **options)
+    else:
+        uvicorn.run(app, **options)
     return 0
 
 

@@ -68,6 +68,8 @@ class Settings(BaseSettings):
     # -- serving --------------------------------------------------------------------------------------------------
     host: str = "127.0.0.1"
     port: int = Field(default=8000, ge=1, le=65535)
+    #: API processes (uvicorn workers); more than one needs a broker, since in-process jobs would run per process
+    web_workers: int = Field(default=1, ge=1, le=64)
     log_level: Literal["debug", "info", "warning", "error"] = "info"
 
     @field_validator("storage_url")
