@@ -4,9 +4,10 @@
                                             [--points 10000] [--bulk 50] [--bulk-points 2000] [--skip ...]
 
 1. catalogue: `graspgen serve --workers N` (`--web-workers` uvicorn processes, default 2) on PostgreSQL with
-   `--grasp-sets` objects, each with one grasp set for one gripper (rows and export blobs written directly; the exports are a real export renamed). An open-loop
-   client sends `--rate` requests/s for `--seconds` s (bounded count) of `GET /v1/catalogue/{object}/{gripper}`
-   (a random object), then `--page-rate` requests/s of `GET /v1/catalogue?gripper=` pages (fleet sync); p50/p99.
+   `--grasp-sets` objects, each with one grasp set for one gripper (rows and export blobs written directly; the
+   exports are a real export renamed). An open-loop client sends `--rate` requests/s for `--seconds` s (bounded
+   count) of `GET /v1/catalogue/{object}/{gripper}` (a random object), then `--page-rate` requests/s of
+   `GET /v1/catalogue?gripper=` pages (fleet sync); p50/p99 of each.
 2. job: time from `POST /v1/jobs` to the job's grasp set being stored (state succeeded), a `--points` job on the
    shipped-size example (a 24 mm x 30 mm cylinder), one warm Celery worker (a small job ran first to compile kernels).
 3. bulk: jobs per minute through two `graspgen worker` processes for a bulk job of `--bulk` parts at `--bulk-points`.
