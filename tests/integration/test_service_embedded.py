@@ -106,6 +106,16 @@ def test_graspgen_serve_embedded_whole_flow(tmp_path):
             ).json()
             parent = wait_job(c, bulk["id"])
             assert parent["state"] == "succeeded" and [i["state"] for i in parent["items"]] == ["succeeded", "failed"]
+
+        # the scripted demo client against the same server
+        demo = subprocess.run(
+            [sys.executable, "-m", "services.demo_client", "--url", url, "--token", token, "--points", "800"],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        assert demo.returncode == 0, demo.stderr
+        assert "grasps" in demo.stdout and "demo-box v1" in demo.stdout
     finally:
         stop_process(proc)
 
