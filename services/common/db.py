@@ -58,7 +58,9 @@ def _make_engine(url: str, settings: Settings) -> Engine:
     if settings.database_schema and u.get_backend_name() == "postgresql":
         # the schema isolates an installation (or a test run) inside a shared database
         connect_args["options"] = f"-csearch_path={settings.database_schema}"
-    return create_engine(url, pool_pre_ping=True, pool_size=5, max_overflow=10, connect_args=connect_args)
+    # no pool_pre_ping: it doubles the round trips of every short read; a dropped connection instead fails one
+    # statement, SQLAlchemy then invalidates the pool, and recycling bounds the age of idle connections
+    return create_engine(url, pool_size=5, max_overflow=10, pool_recycle=1800, connect_args=connect_args)
 
 
 def _sqlite_pragmas(engine: Engine) -> None:
