@@ -47,3 +47,23 @@ def test_upgrade_head_on_empty_postgresql_matches_models_and_downgrades(fresh_pg
 
 def test_upgrade_head_on_empty_sqlite_matches_models_and_downgrades(tmp_path):
     _check(Settings(storage_dir=tmp_path))
+
+
+def test_graspgen_migrate_command_upgrades_the_configured_database(fresh_pg_schema, monkeypatch, capsys):
+    from services.cli import main
+    from services.common.settings import get_settings
+
+    monkeypatch.setenv("GRASPGEN_DATABASE_URL", PG_URL)
+    monkeypatch.setenv("GRASPGEN_DATABASE_SCHEMA", fresh_pg_schema)
+    get_settings.cache_clear()
+    try:
+        assert main(["migrate"]) == 0
+    finally:
+        get_settings.cache_clear()
+    out = capsys.readouterr().out
+    assert "is at head" in out and "postgres@" in out
+    db = Database(Settings(database_url=PG_URL, database_schema=fresh_pg_schema))
+    try:
+        assert _diff(db) == []
+    finally:
+        db.dispose()
