@@ -303,9 +303,14 @@ def job_out(session: Session, job: Job) -> dict[str, Any]:
 
 
 def cancel_job(session: Session, dispatcher: Dispatcher, principal: Principal, job_id: uuid.UUID) -> Job:
-    job = session.execute(select(Job).where(Job.id == job_id).with_for_update()).scalar_one_or_none()
+    job = session.get(Job, job_id)
     if job is None:
         raise ApiError(404, "not-found", f"no job {job_id}")
+    if job.kind != "bulk":
+        # rows are locked child first, then parent, the order the worker uses when a child finishes
+        job = session.execute(
+            select(Job).where(Job.id == job_id).with_for_update().execution_options(populate_existing=True)
+        ).scalar_one()
     if job.created_by != principal.name and not principal.has("admin"):
         raise ApiError(403, "forbidden", "only the job's submitter or an admin token may cancel it")
     if job.state in TERMINAL_STATES and job.kind != "bulk":
