@@ -19,7 +19,7 @@ from typing import Any
 
 from celery.exceptions import SoftTimeLimitExceeded
 from sqlalchemy import func, insert, select, update
-from sqlalchemy.exc import IntegrityError
+from sqlalchemy.exc import IntegrityError, OperationalError
 from sqlalchemy.orm import Session
 
 from services.common import jobs
@@ -110,6 +110,8 @@ class JobRunner:
 
             if isinstance(exc, Cancelled):
                 return self._end(jid, "cancelled")
+            if isinstance(exc, OperationalError):
+                raise  # the database, not the job, failed: the task retries and the job runs again
             if isinstance(exc, GraspgenError):
                 err = jobs.problem(
                     exc.code, "Invalid input", exc.message, **({"field": exc.field} if exc.field else {})
