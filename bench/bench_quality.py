@@ -18,8 +18,11 @@ part the candidates are generated once, then k = k1 * k2 grasps are selected by
 
 Reported per selection: coverage at (1 cm, 30 deg) and (2 cm, 45 deg), the smallest pairwise combined distance
 max(dp / 1 cm, angle / 30 deg) (below 1: two selected grasps cover each other), the mean quality score, and, with
-simulation, the share of the k grasps that MuJoCo holds through the lift and shake (physics.py defaults, steel,
-20 N, no repair) at the exported pose (the roll choose_roll picks). A second table times 64 simulated grasps with
+simulation, the share of the k grasps that MuJoCo holds through the lift and shake (physics.py defaults: 20 N per
+finger, no repair) at the exported pose (the roll choose_roll picks). Masses follow the material each part stands for
+(`density_of`): the example parts steel (7850 kg/m^3), the T-LESS parts plastic (1200), the trimesh machined parts
+aluminium (2700), the YCB objects their published masses (mustard bottle 0.603 kg, sugar box 0.514 kg, soup can
+0.349 kg) over their closed volumes. A second table times 64 simulated grasps with
 one and two worker threads. No assertions: the numbers are for docs.
 """
 
@@ -51,6 +54,19 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "meshes"
 METHODS = ("two-stage", "two-stage+quality", "random", "top-friction", "single-stage")
 SINGLE_STAGE_SAMPLE = 2500
+#: published YCB masses, kg
+YCB_MASS = {"ycb_mustard_bottle": 0.603, "ycb_sugar_box": 0.514, "ycb_tomato_soup_can": 0.349}
+
+
+def density_of(name: str, part) -> float:
+    """kg/m^3 for the material the part stands for (see the module docstring)."""
+    if name in YCB_MASS:
+        return YCB_MASS[name] / abs(float(part.mesh.volume))
+    if name.startswith("tless_"):
+        return 1200.0
+    if name.startswith("trimesh_"):
+        return 2700.0
+    return physics.DEFAULT_DENSITY
 
 
 def parts(names: list[str] | None):
@@ -108,7 +124,8 @@ def run_part(name, part, args, spec) -> dict:
     sim_part = None
     if not args.no_sim and part.mesh is not None:
         t0 = time.perf_counter()
-        sim_part = physics.prepare_part(part.mesh, spec, seed=0)
+        row["density"] = density_of(name, part)
+        sim_part = physics.prepare_part(part.mesh, spec, density=row["density"], seed=0)
         row["decomposition_s"] = time.perf_counter() - t0
         row["geometry"] = f"{sim_part.geometry} ({sim_part.pieces})"
     for method, idx in sel.items():
@@ -165,8 +182,8 @@ def markdown(rows, timing, args) -> str:
         f"{args.points} points, k = {args.k1} x {args.k2} = {args.k1 * args.k2} for every method, gripper `pgn-80` "
         "(80 mm stroke), seed 0. Coverage: share of all candidates within (1 cm, 30 deg) / (2 cm, 45 deg) of a "
         "selected grasp. Min pair: smallest max(dp / 1 cm, angle / 30 deg) between two selected grasps. Score: mean "
-        "quality score (quality.py). Held: share of the k grasps MuJoCo holds through lift and shake (steel, 20 N "
-        "per finger, no repair).",
+        "quality score (quality.py). Held: share of the k grasps MuJoCo holds through lift and shake (20 N per "
+        "finger, no repair; densities per material, see the script's docstring).",
         "",
         f"Machine: {platform.machine()}, {os.cpu_count()} cores shared with other jobs, Python "
         f"{platform.python_version()}, mujoco {__import__('mujoco').__version__}.",
@@ -209,9 +226,16 @@ def markdown(rows, timing, args) -> str:
                 f"{fmt(v['cov2'], True)} | {fmt(v['min_pair'])} | {fmt(v['score'])} | "
                 f"{fmt(v.get('success'), True)} | {fails} |"
             )
-    geo = [f"{r['part']}: {r['geometry']}, {r['decomposition_s']:.1f} s" for r in rows if r.get("geometry")]
+    geo = [
+        f"{r['part']}: {r['geometry']}, {r['decomposition_s']:.1f} s, {r['density']:.0f} kg/m^3"
+        for r in rows
+        if r.get("geometry")
+    ]
     if geo:
-        lines += ["", "Collision geometry (method and pieces) and the time to build it: " + "; ".join(geo) + "."]
+        lines += [
+            "",
+            "Collision geometry (method and pieces), the time to build it, and the density: " + "; ".join(geo) + ".",
+        ]
     if timing:
         lines += [
             "",

@@ -290,8 +290,8 @@ def _xml(pieces, spec: GripperSpec, friction: float, mass: float, com, inertia, 
     <joint joint1="close1" joint2="close0" polycoef="0 1 0 0 0"/>
   </equality>
   <actuator>
-    <motor name="grip0" joint="close0" ctrlrange="0 {c.grip_force:.9g}"/>
-    <motor name="grip1" joint="close1" ctrlrange="0 {c.grip_force:.9g}"/>
+    <motor name="grip0" joint="close0" ctrlrange="{-c.grip_force:.9g} {c.grip_force:.9g}"/>
+    <motor name="grip1" joint="close1" ctrlrange="{-c.grip_force:.9g} {c.grip_force:.9g}"/>
   </actuator>
 </mujoco>
 """
@@ -349,7 +349,9 @@ def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
 class _Grasp:
     """The state of one simulated grasp on its own MjData."""
 
-    def __init__(self, sim: SimPart, T_object_grasp: np.ndarray, width: float, rng: np.random.Generator) -> None:
+    def __init__(
+        self, sim: SimPart, T_object_grasp: np.ndarray, width: float, inside: bool, rng: np.random.Generator
+    ) -> None:
         import mujoco
 
         self.mj = mujoco
@@ -375,8 +377,12 @@ class _Grasp:
         self.p0 = R_err @ T_go[:3, 3] + t_err
         self.midpoint_object = T[:3, 3].copy()  # the contact midpoint in the object frame
         spec = sim.spec
-        open_width = spec.open_width(width)
-        self.q_open = max((spec.stroke - open_width) / 2, 0.0)
+        self.inside = bool(inside)
+        if not self.inside:  # inner faces at the pre-grasp opening, closing inwards
+            self.q_open = max((spec.stroke - spec.open_width(width)) / 2, 0.0)
+        else:  # inside grasps mirror the fingers: outer faces at the narrower pre-grasp width, opening outwards
+            o = max(width - spec.pregrasp_clearance, spec.min_width + 2 * spec.finger_thickness)
+            self.q_open = min(max(spec.stroke / 2 - (o / 2 - spec.finger_thickness), 0.0), spec.stroke / 2)
         # the approach starts where the fingers' leading edge (z = +finger_depth / 2) is below the part's lowest point
         z = (sim.vertices @ self.R0.T + self.p0)[:, 2]
         self.approach_distance = max(spec.finger_depth / 2 - float(z.min()) + self.c.approach_step, 0.0)
@@ -427,7 +433,7 @@ class _Grasp:
             return SimResult(False, "collision", 0.0, 0.0, 0)
         d.qvel[:] = 0.0
         mj.mj_forward(m, d)
-        d.ctrl[:] = c.grip_force
+        d.ctrl[:] = -c.grip_force if self.inside else c.grip_force
         mj.mj_step(m, d, nstep=max(1, int(round(c.close_time / c.timestep))))
         n0, n1, _ = self._contacts()
         if n0 == 0 or n1 == 0:
@@ -469,11 +475,14 @@ class _Grasp:
                 yield g - u * (c.shake_acceleration * math.sin(2 * math.pi * (k + 0.5) / n_shake))
 
 
-def simulate_grasp(sim: SimPart, T_object_grasp: np.ndarray, width: float, *, seed: int = 0, key: int = 0) -> SimResult:
-    """Simulate one grasp (pose (4, 4) in the object frame, contact distance `width` m). `key` (e.g. the candidate
-    index) and `seed` pick the placement error, so a grasp's outcome does not depend on what else runs."""
+def simulate_grasp(
+    sim: SimPart, T_object_grasp: np.ndarray, width: float, *, inside: bool = False, seed: int = 0, key: int = 0
+) -> SimResult:
+    """Simulate one grasp (pose (4, 4) in the object frame, contact distance `width` m; `inside`: the fingers open
+    outwards onto the contacts). `key` (e.g. the candidate index) and `seed` pick the placement error, so a grasp's
+    outcome does not depend on what else runs."""
     rng = np.random.default_rng([int(seed), int(key)])
-    return _Grasp(sim, T_object_grasp, float(width), rng).run()
+    return _Grasp(sim, T_object_grasp, float(width), inside, rng).run()
 
 
 def simulate_grasps(
@@ -484,19 +493,26 @@ def simulate_grasps(
     seed: int = 0,
     keys: np.ndarray | None = None,
     workers: int | None = None,
+    inside: np.ndarray | None = None,
 ) -> list[SimResult]:
-    """Simulate grasps (poses (n, 4, 4), widths (n,)) in parallel threads; results in input order."""
+    """Simulate grasps (poses (n, 4, 4), widths (n,), inside (n,) bool or None) in parallel threads; results in
+    input order."""
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
     widths = np.asarray(widths, dtype=np.float64).reshape(-1)
     keys = np.arange(len(poses)) if keys is None else np.asarray(keys).reshape(-1)
     n = len(poses)
+    inside = np.zeros(n, dtype=bool) if inside is None else np.asarray(inside, dtype=bool).reshape(-1)
     if n == 0:
         return []
+
+    def one(i: int) -> SimResult:
+        return simulate_grasp(sim, poses[i], widths[i], inside=bool(inside[i]), seed=seed, key=int(keys[i]))
+
     workers = min(n, workers or os.cpu_count() or 1)
     if workers <= 1:
-        return [simulate_grasp(sim, poses[i], widths[i], seed=seed, key=int(keys[i])) for i in range(n)]
+        return [one(i) for i in range(n)]
     with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="graspgen-sim") as pool:
-        return list(pool.map(lambda i: simulate_grasp(sim, poses[i], widths[i], seed=seed, key=int(keys[i])), range(n)))
+        return list(pool.map(one, range(n)))
 
 
 def summarise(results: list[SimResult]) -> dict[str, Any]:

@@ -283,7 +283,11 @@ def _cluster_and_export(cands, obj, spec, params, mu, stats, report, t_all, warn
             "near": {"radius": quality.NEAR.radius, "angle_deg": quality.NEAR.angle_deg},
         }
     sim = None
-    if extras.validate:
+    if extras.validate and len(medoids) == 0:
+        from .physics import summarise
+
+        stats["validation"] = {**summarise([]), "repaired": 0, "simulated": 0}
+    elif extras.validate:
         t0 = time.perf_counter()
         medoids, sim = _validate(cands, labels, medoids, clusters, spec, mu, params, extras, stats, report)
         stats["timings_s"]["validate"] = time.perf_counter() - t0
@@ -532,7 +536,13 @@ def _validate(cands, labels, selected, clusters, spec, mu, params, extras: _Extr
     report("validate", 0.1)
     widths = cands.widths
     run = lambda idx: physics.simulate_grasps(  # noqa: E731
-        sim_part, _poses(cands, idx), widths[idx], seed=params.seed, keys=idx, workers=extras.sim_workers
+        sim_part,
+        _poses(cands, idx),
+        widths[idx],
+        seed=params.seed,
+        keys=idx,
+        workers=extras.sim_workers,
+        inside=cands.inside[idx],
     )
     results = run(selected)
     first = list(results)

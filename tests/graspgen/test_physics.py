@@ -133,7 +133,7 @@ def test_failed_medoids_are_repaired_from_their_own_cluster(monkeypatch):
     medoids = set(plain.candidates.medoids.tolist())
     calls = []
 
-    def fake(sim, poses, widths, *, seed=0, keys=None, workers=None):
+    def fake(sim, poses, widths, *, seed=0, keys=None, workers=None, inside=None):
         calls.append(list(keys))
         return [
             physics.SimResult(False, "slipped", 9.0, 0.0, 2)
@@ -157,7 +157,7 @@ def test_failed_medoids_are_repaired_from_their_own_cluster(monkeypatch):
 def test_repair_gives_up_after_the_limit(monkeypatch):
     box = trimesh.creation.box(extents=(0.04, 0.03, 0.02))
 
-    def fail(sim, poses, widths, *, seed=0, keys=None, workers=None):
+    def fail(sim, poses, widths, *, seed=0, keys=None, workers=None, inside=None):
         return [physics.SimResult(False, "dropped", 30.0, 0.0, 0) for _ in keys]
 
     monkeypatch.setattr(physics, "simulate_grasps", fail)
@@ -186,3 +186,32 @@ def test_recording_holds_the_validation_outcome_and_coverage(tmp_path):
     )
     assert r.returncode == 0, r.stderr
     assert "/grasps/validation" in r.stdout and "/stats/coverage" in r.stdout
+
+
+def test_inside_grasp_opens_onto_a_bore():
+    # a ring with a 40 mm bore; slim fingers go into the bore and open outwards onto its wall
+    ring = trimesh.creation.annulus(r_min=0.020, r_max=0.030, height=0.015, sections=96)
+    slim = GripperSpec.from_dict(
+        {**GRIPPER, "finger_width": 0.008, "finger_thickness": 0.004, "palm_depth": 0.0, "pregrasp_clearance": 0.004}
+    )
+    sim = physics.prepare_part(ring, slim)
+    T = _pose([0, 0, 0], [1, 0, 0], roll_rad=0.0)  # approach along the ring's axis
+    width = 0.04 * np.cos(np.pi / 96)  # the bore's flat-to-flat width at y = 0 is a little under 40 mm
+    assert physics.simulate_grasp(sim, T, width, inside=True).success
+    # the same pose as an outside grasp closes onto nothing between the fingers
+    assert physics.simulate_grasp(sim, T, width).reason in ("collision", "no_contact")
+
+
+def test_validation_of_an_empty_set_and_of_a_recluster(tmp_path):
+    big = graspgen.generate(
+        trimesh.creation.box(extents=(0.1, 0.1, 0.1)), GRIPPER, units="m", points=600, validate=True
+    )
+    assert big.grasps == [] and big.stats["validation"]["tested"] == 0
+    box = trimesh.creation.box(extents=(0.04, 0.03, 0.02))
+    gs = graspgen.generate(box, GRIPPER, units="m", points=1000, k1=2, k2=2)
+    gs.save_candidates(tmp_path / "c.npz")
+    with pytest.raises(graspgen.InvalidParameterError, match="need the part"):
+        graspgen.recluster(tmp_path / "c.npz", gs.to_json(), k1=2, k2=1, validate=True)
+    again = graspgen.recluster(tmp_path / "c.npz", gs.to_json(), k1=2, k2=1, validate=True, mesh=box)
+    assert again.stats["validation"]["tested"] == len(again.grasps) == 2
+    assert all("sim" in g for g in again.grasps)
