@@ -215,3 +215,14 @@ def test_validation_of_an_empty_set_and_of_a_recluster(tmp_path):
     again = graspgen.recluster(tmp_path / "c.npz", gs.to_json(), k1=2, k2=1, validate=True, mesh=box)
     assert again.stats["validation"]["tested"] == len(again.grasps) == 2
     assert all("sim" in g for g in again.grasps)
+
+
+def test_validated_export_is_byte_identical_for_a_seed():
+    box = trimesh.creation.box(extents=(0.04, 0.03, 0.02))
+
+    def run():
+        gs = graspgen.generate(box, GRIPPER, units="m", points=800, k1=2, k2=2, validate=True, seed=3, sim_workers=2)
+        gs.stats["timings_s"] = {}
+        return gs.to_json_bytes()
+
+    assert run() == run()
