@@ -18,6 +18,7 @@ from .problems import ApiError
 
 __all__ = [
     "SessionDep",
+    "ReadSessionDep",
     "SettingsDep",
     "StorageDep",
     "DispatcherDep",
@@ -37,6 +38,15 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
     uses it; closing only returns its connection to the pool.
     """
     session = request.app.state.db.sessions()
+    try:
+        yield session
+    finally:
+        session.close()
+
+
+async def get_read_session(request: Request) -> AsyncIterator[Session]:
+    """A session for routes that only read: autocommit on PostgreSQL, so no transaction round trips."""
+    session = request.app.state.db.read_sessions()
     try:
         yield session
     finally:
@@ -79,6 +89,7 @@ def require(scope: str) -> Callable[[Principal], Principal]:
 
 
 SessionDep = Annotated[Session, Depends(get_session)]
+ReadSessionDep = Annotated[Session, Depends(get_read_session)]
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 StorageDep = Annotated[Storage, Depends(get_storage)]
 DispatcherDep = Annotated[Dispatcher, Depends(get_dispatcher)]

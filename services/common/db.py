@@ -22,6 +22,14 @@ class Database:
         self.url = settings.sqlalchemy_url
         self.engine = _make_engine(self.url, settings)
         self.sessions = sessionmaker(self.engine, expire_on_commit=False)
+        if self.is_sqlite:
+            self.read_sessions = self.sessions
+        else:
+            # reads need no transaction: in autocommit a lookup is one round trip instead of BEGIN, SELECT, ROLLBACK;
+            # the option engine shares the pool and sets autocommit per checkout
+            self.read_sessions = sessionmaker(
+                self.engine.execution_options(isolation_level="AUTOCOMMIT"), expire_on_commit=False
+            )
 
     @property
     def is_sqlite(self) -> bool:
@@ -60,7 +68,15 @@ def _make_engine(url: str, settings: Settings) -> Engine:
         connect_args["options"] = f"-csearch_path={settings.database_schema}"
     # no pool_pre_ping: it doubles the round trips of every short read; a dropped connection instead fails one
     # statement, SQLAlchemy then invalidates the pool, and recycling bounds the age of idle connections
-    return create_engine(url, pool_size=5, max_overflow=10, pool_recycle=1800, connect_args=connect_args)
+    # sized for the API's thread pool: an overflow connection is opened and closed per request, which costs a
+    # PostgreSQL backend each time
+    return create_engine(
+        url,
+        pool_size=settings.db_pool_size,
+        max_overflow=settings.db_pool_size // 2,
+        pool_recycle=1800,
+        connect_args=connect_args,
+    )
 
 
 def _sqlite_pragmas(engine: Engine) -> None:

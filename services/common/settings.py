@@ -23,6 +23,8 @@ class Settings(BaseSettings):
     # -- where things live ----------------------------------------------------------------------------------------
     #: SQLAlchemy URL (postgresql+psycopg://...); unset: SQLite file `graspgen.sqlite3` under storage_dir
     database_url: SecretStr | None = None
+    #: pooled database connections per process (plus half as many again for bursts)
+    db_pool_size: int = Field(default=20, ge=1, le=500)
     #: PostgreSQL schema holding the tables (tests isolate runs with it); unset: the server's default search_path
     database_schema: str | None = Field(default=None, pattern=r"^[a-z_][a-z0-9_]{0,62}$")
     #: Celery broker (redis://host:6379/0); unset: jobs run on an in-process thread pool with the same task

@@ -6,7 +6,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Path, Query, Request, Response
 
 from ..crud import grasp_sets as crud
-from ..deps import ReadDep, SessionDep, SettingsDep, StorageDep
+from ..deps import ReadDep, ReadSessionDep, SettingsDep, StorageDep
 from ..http import IMMUTABLE, REVALIDATE, BlobCache, blob_response, etag_matches, not_modified
 from ..problems import ApiError
 from ..schemas import SLUG, GraspPage, GraspSetPage
@@ -55,7 +55,7 @@ def export_response(request: Request, ref: crud.ExportRef, *, cache_control: str
 )
 def list_grasp_sets(
     principal: ReadDep,
-    session: SessionDep,
+    session: ReadSessionDep,
     settings: SettingsDep,
     object: Annotated[str | None, Query(pattern=SLUG)] = None,
     gripper: Annotated[str | None, Query(pattern=SLUG)] = None,
@@ -77,7 +77,7 @@ def list_grasp_sets(
     response_class=Response,
     responses={**_EXPORT_RESPONSE, **problems(304, 404, 422)},
 )
-def get_grasp_set(request: Request, grasp_set_id: GraspSetId, principal: ReadDep, session: SessionDep) -> Response:
+def get_grasp_set(request: Request, grasp_set_id: GraspSetId, principal: ReadDep, session: ReadSessionDep) -> Response:
     return export_response(request, crud.export_ref(session, grasp_set_id), cache_control=IMMUTABLE)
 
 
@@ -88,7 +88,7 @@ def get_grasp_set(request: Request, grasp_set_id: GraspSetId, principal: ReadDep
     responses={200: {"content": {"application/octet-stream": {}}}, **problems(304, 404, 422)},
 )
 def get_candidates(
-    request: Request, grasp_set_id: GraspSetId, principal: ReadDep, session: SessionDep, storage: StorageDep
+    request: Request, grasp_set_id: GraspSetId, principal: ReadDep, session: ReadSessionDep, storage: StorageDep
 ) -> Response:
     gs = crud.get_grasp_set(session, grasp_set_id)
     return blob_response(
@@ -108,7 +108,7 @@ def get_candidates(
     responses={200: {"content": {"application/octet-stream": {}}}, **problems(304, 404, 422)},
 )
 def get_recording(
-    request: Request, grasp_set_id: GraspSetId, principal: ReadDep, session: SessionDep, storage: StorageDep
+    request: Request, grasp_set_id: GraspSetId, principal: ReadDep, session: ReadSessionDep, storage: StorageDep
 ) -> Response:
     gs = crud.get_grasp_set(session, grasp_set_id)
     return blob_response(
@@ -130,7 +130,7 @@ def get_recording(
 def list_grasps(
     grasp_set_id: GraspSetId,
     principal: ReadDep,
-    session: SessionDep,
+    session: ReadSessionDep,
     settings: SettingsDep,
     min_width: Annotated[float | None, Query(ge=0, description="metres")] = None,
     max_width: Annotated[float | None, Query(ge=0, description="metres")] = None,
@@ -162,7 +162,7 @@ def list_grasps(
 def list_catalogue(
     request: Request,
     principal: ReadDep,
-    session: SessionDep,
+    session: ReadSessionDep,
     settings: SettingsDep,
     gripper: Annotated[str, Query(pattern=SLUG, examples=["pgn-80"])],
     updated_since: Annotated[datetime | None, Query(description="ISO 8601; naive times are UTC")] = None,
@@ -199,7 +199,7 @@ def get_catalogue_entry(
     object: Annotated[str, Path(pattern=SLUG)],
     gripper: Annotated[str, Path(pattern=SLUG)],
     principal: ReadDep,
-    session: SessionDep,
+    session: ReadSessionDep,
     version: Annotated[int | None, Query(ge=1)] = None,
 ) -> Response:
     ref = crud.catalogue_entry(session, object, gripper, version)

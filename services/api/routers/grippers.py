@@ -5,7 +5,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Body, Path, Query, Response
 
 from ..crud import grippers as crud
-from ..deps import ReadDep, SessionDep, SettingsDep, WriteDep
+from ..deps import ReadDep, ReadSessionDep, SessionDep, SettingsDep, WriteDep
 from ..schemas import GRIPPER_SPEC_EXAMPLE, SLUG, GripperOut, GripperPage, GripperVersionOut
 from . import problems
 
@@ -41,7 +41,7 @@ def create_gripper(
 @router.get("", response_model=GripperPage, summary="List grippers by name", responses=problems(422))
 def list_grippers(
     principal: ReadDep,
-    session: SessionDep,
+    session: ReadSessionDep,
     settings: SettingsDep,
     cursor: str | None = None,
     limit: Annotated[int | None, Query(ge=1)] = None,
@@ -54,7 +54,7 @@ def list_grippers(
 @router.get(
     "/{name}", response_model=GripperOut, summary="A gripper, its latest spec and versions", responses=problems(404)
 )
-def get_gripper(name: NameParam, principal: ReadDep, session: SessionDep) -> dict:
+def get_gripper(name: NameParam, principal: ReadDep, session: ReadSessionDep) -> dict:
     return crud.gripper_out(session, name)
 
 
@@ -65,6 +65,6 @@ def get_gripper(name: NameParam, principal: ReadDep, session: SessionDep) -> dic
     responses=problems(404),
 )
 def get_gripper_version(
-    name: NameParam, version: Annotated[int, Path(ge=1)], principal: ReadDep, session: SessionDep
+    name: NameParam, version: Annotated[int, Path(ge=1)], principal: ReadDep, session: ReadSessionDep
 ) -> dict:
     return crud.get_gripper_version(session, name, version)

@@ -8,7 +8,7 @@ from fastapi import APIRouter, Header, Path, Response
 from services.common.models import TERMINAL_STATES
 
 from ..crud import jobs as crud
-from ..deps import DispatcherDep, ReadDep, SessionDep, SettingsDep, WriteDep
+from ..deps import DispatcherDep, ReadDep, ReadSessionDep, SessionDep, SettingsDep, WriteDep
 from ..schemas import BulkRequest, JobOut, JobRequest
 from . import problems
 
@@ -85,7 +85,7 @@ def submit_bulk(
 @router.get(
     "/jobs/{job_id}", response_model=JobOut, summary="A job's state, stage and progress", responses=problems(404, 422)
 )
-def get_job(job_id: JobId, response: Response, principal: ReadDep, session: SessionDep) -> dict:
+def get_job(job_id: JobId, response: Response, principal: ReadDep, session: ReadSessionDep) -> dict:
     out = crud.job_out(session, crud.get_job(session, job_id))
     if out["state"] not in TERMINAL_STATES:
         response.headers["Retry-After"] = RETRY_AFTER_S

@@ -5,7 +5,7 @@ from typing import Annotated
 from fastapi import APIRouter, File, Form, Path, Query, Request, Response, UploadFile
 
 from ..crud import objects as crud
-from ..deps import ReadDep, SessionDep, SettingsDep, StorageDep, WriteDep
+from ..deps import ReadDep, ReadSessionDep, SessionDep, SettingsDep, StorageDep, WriteDep
 from ..http import IMMUTABLE, blob_response
 from ..schemas import SLUG, ObjectOut, ObjectPage, ObjectVersionOut
 from . import problems
@@ -53,7 +53,7 @@ def upload_object(
 @router.get("", response_model=ObjectPage, summary="List objects by name", responses=problems(422))
 def list_objects(
     principal: ReadDep,
-    session: SessionDep,
+    session: ReadSessionDep,
     settings: SettingsDep,
     cursor: str | None = None,
     limit: Annotated[int | None, Query(ge=1)] = None,
@@ -64,7 +64,7 @@ def list_objects(
 
 
 @router.get("/{name}", response_model=ObjectOut, summary="An object and all its versions", responses=problems(404))
-def get_object(name: NameParam, principal: ReadDep, session: SessionDep) -> dict:
+def get_object(name: NameParam, principal: ReadDep, session: ReadSessionDep) -> dict:
     return crud.get_object(session, name)
 
 
@@ -74,7 +74,7 @@ def get_object(name: NameParam, principal: ReadDep, session: SessionDep) -> dict
     summary="One object version",
     responses=problems(404),
 )
-def get_object_version(name: NameParam, version: VersionParam, principal: ReadDep, session: SessionDep) -> dict:
+def get_object_version(name: NameParam, version: VersionParam, principal: ReadDep, session: ReadSessionDep) -> dict:
     return crud.version_out(name, crud.get_version(session, name, version))
 
 
@@ -89,7 +89,7 @@ def get_object_file(
     name: NameParam,
     version: VersionParam,
     principal: ReadDep,
-    session: SessionDep,
+    session: ReadSessionDep,
     storage: StorageDep,
 ) -> Response:
     v = crud.get_version(session, name, version)
