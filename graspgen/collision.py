@@ -369,43 +369,60 @@ def _phase(
             if not angular:
                 hit = True
                 break
-            # per open roll: the node's oriented box projected onto the roll's Y and Z axes
+            # the node's ball against the region at every roll at once (branch-free: vectorised), then the
+            # oriented box projected onto the roll's Y and Z axes at the open rolls the ball reaches
             hy, zlo, zhi = reg[r, _HY], reg[r, _ZLO], reg[r, _ZHI]
-            q0y = nd[3] * ya + nd[4] * yb + nd[5] * yc
-            q1y = nd[6] * ya + nd[7] * yb + nd[8] * yc
-            q2y = nd[9] * ya + nd[10] * yb + nd[11] * yc
-            q0z = nd[3] * za + nd[4] * zb + nd[5] * zc
-            q1z = nd[6] * za + nd[7] * zb + nd[8] * zc
-            q2z = nd[9] * za + nd[10] * zb + nd[11] * zc
-            reach = np.uint64(0)
-            inside = np.uint64(0)
+            near = np.uint64(0)
+            ball_in = np.uint64(0)
             for k in range(kmax):
-                bit = np.uint64(1) << np.uint64(k)
-                if sym:
-                    bit |= np.uint64(1) << np.uint64(k + half)
-                if not (todo & bit):
-                    continue
-                ck, sk = cos_k[k], sin_k[k]
-                yk = ck * yc0 + sk * zc0
-                zk = -sk * yc0 + ck * zc0
-                eh = min(
-                    nd[12] * abs(ck * q0y + sk * q0z)
-                    + nd[13] * abs(ck * q1y + sk * q1z)
-                    + nd[14] * abs(ck * q2y + sk * q2z),
-                    rho,
-                )
-                ev = min(
-                    nd[12] * abs(ck * q0z - sk * q0y)
-                    + nd[13] * abs(ck * q1z - sk * q1y)
-                    + nd[14] * abs(ck * q2z - sk * q2y),
-                    rho,
-                )
-                if abs(yk) - eh > hy or zk + ev < zlo or zk - ev > zhi:
-                    continue
-                if x_in and abs(yk) + eh <= hy and zk - ev >= zlo and zk + ev <= zhi:
-                    inside |= bit
-                else:
-                    reach |= bit
+                yk = cos_k[k] * yc0 + sin_k[k] * zc0
+                zk = cos_k[k] * zc0 - sin_k[k] * yc0
+                ayk = abs(yk)
+                reach_k = (ayk - rho <= hy) & (zk + rho >= zlo) & (zk - rho <= zhi)
+                in_k = (ayk + rho <= hy) & (zk - rho >= zlo) & (zk + rho <= zhi)
+                near |= np.uint64(reach_k) << np.uint64(k)
+                ball_in |= np.uint64(in_k) << np.uint64(k)
+            if sym:
+                near |= near << np.uint64(half)
+                ball_in |= ball_in << np.uint64(half)
+            inside = ball_in & todo if x_in else np.uint64(0)
+            near &= todo & ~inside
+            reach = np.uint64(0)
+            if near:
+                q0y = nd[3] * ya + nd[4] * yb + nd[5] * yc
+                q1y = nd[6] * ya + nd[7] * yb + nd[8] * yc
+                q2y = nd[9] * ya + nd[10] * yb + nd[11] * yc
+                q0z = nd[3] * za + nd[4] * zb + nd[5] * zc
+                q1z = nd[6] * za + nd[7] * zb + nd[8] * zc
+                q2z = nd[9] * za + nd[10] * zb + nd[11] * zc
+                for k in range(kmax):
+                    bit = np.uint64(1) << np.uint64(k)
+                    if sym:
+                        bit |= np.uint64(1) << np.uint64(k + half)
+                    if not (near & bit):
+                        continue
+                    ck, sk = cos_k[k], sin_k[k]
+                    yk = ck * yc0 + sk * zc0
+                    zk = ck * zc0 - sk * yc0
+                    ayk = abs(yk)
+                    eh = (
+                        nd[12] * abs(ck * q0y + sk * q0z)
+                        + nd[13] * abs(ck * q1y + sk * q1z)
+                        + nd[14] * abs(ck * q2y + sk * q2z)
+                    )
+                    ev = (
+                        nd[12] * abs(ck * q0z - sk * q0y)
+                        + nd[13] * abs(ck * q1z - sk * q1y)
+                        + nd[14] * abs(ck * q2z - sk * q2y)
+                    )
+                    if ayk - eh > hy or zk + ev < zlo or zk - ev > zhi:
+                        continue
+                    if x_in and ayk + eh <= hy and zk - ev >= zlo and zk + ev <= zhi:
+                        inside |= bit & todo
+                    else:
+                        reach |= bit
+                        if not x_in:
+                            break  # no roll can be wholly inside: descend
             if inside:
                 mask |= inside & target
                 if mask == target:
