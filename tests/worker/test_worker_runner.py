@@ -17,7 +17,7 @@ from sqlalchemy import func, select, update
 from services.common.models import Grasp, GraspSet, Job
 from services.worker.runner import JobRunner
 
-pytestmark = pytest.mark.integration
+pytestmark = [pytest.mark.integration, pytest.mark.slow]  # runs the core; the first job compiles its kernels
 
 SMALL = {"points": 600, "k1": 4, "k2": 2}
 
