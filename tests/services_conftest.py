@@ -334,3 +334,66 @@ def settings_env(**values: object) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if not k.startswith("GRASPGEN_")}
     env.update({f"GRASPGEN_{k.upper()}": str(v) for k, v in values.items() if v is not None})
     return env
+
+
+def seed_grasp_sets(
+    service: Service, gripper: str, objects: list[str], *, version_of: dict[str, int] | None = None
+) -> dict[str, list[int]]:
+    """Grasp-set rows and export blobs written directly (no core run), as a catalogue to page through.
+
+    Every object gets an object version and `version_of[name]` (default 1) more grasp sets for `gripper`, numbered
+    after any it has; object and gripper are registered through the API first. Returns name -> new ids, oldest first.
+    """
+    import json
+
+    from sqlalchemy import func, select
+
+    from services.common.jobs import params_key
+    from services.common.models import GraspSet, Gripper, GripperVersion, ObjectModel, ObjectVersion
+
+    assert service.gripper(gripper).status_code in (200, 201)
+    out: dict[str, list[int]] = {}
+    state = service.app.state
+    for name in objects:
+        assert service.upload(name).status_code in (200, 201)
+        with state.db.session() as s:
+            obj = s.execute(select(ObjectModel).where(ObjectModel.name == name)).scalar_one()
+            ov = s.execute(select(ObjectVersion).where(ObjectVersion.object_id == obj.id)).scalars().first()
+            g = s.execute(select(Gripper).where(Gripper.name == gripper)).scalar_one()
+            gv = s.execute(select(GripperVersion).where(GripperVersion.gripper_id == g.id)).scalars().first()
+            ids = []
+            have = (
+                s.execute(
+                    select(func.max(GraspSet.version)).where(GraspSet.object_id == obj.id, GraspSet.gripper_id == g.id)
+                ).scalar_one_or_none()
+                or 0
+            )
+            for v in range(have + 1, have + (version_of or {}).get(name, 1) + 1):
+                params = {"points": 1000 + v, "seed": v}
+                export = {
+                    "format": "graspgen.grasp_set/1",
+                    "object": {"name": name, "version": 1},
+                    "params": params,
+                    "grasps": [],
+                }
+                blob = state.storage.put_bytes(json.dumps(export).encode())
+                gs = GraspSet(
+                    object_id=obj.id,
+                    gripper_id=g.id,
+                    version=v,
+                    object_version_id=ov.id,
+                    gripper_version_id=gv.id,
+                    params=params,
+                    params_key=params_key(params, None),
+                    job_id=uuid.uuid4(),
+                    stats={},
+                    grasp_count=0,
+                    export_key=blob.key,
+                    export_sha256=blob.sha256,
+                    export_size=blob.size,
+                )
+                s.add(gs)
+                s.flush()
+                ids.append(gs.id)
+            out[name] = ids
+    return out
