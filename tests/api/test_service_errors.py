@@ -21,8 +21,12 @@ PROBLEM = "application/problem+json"
         ("POST", "/v1/jobs", {"json": {"object": "x" * 100, "gripper": "y"}}, 422),
         ("POST", "/v1/grippers", {"json": [1, 2]}, 422),
         ("POST", "/v1/objects", {"data": {"name": "x", "units": "mm"}}, 422),  # no file
-        ("POST", "/v1/jobs", {"content": b"[" * (3 * 1024 * 1024), "headers": {"Content-Type": "application/json"}},
-         413),
+        (
+            "POST",
+            "/v1/jobs",
+            {"content": b"[" * (3 * 1024 * 1024), "headers": {"Content-Type": "application/json"}},
+            413,
+        ),
         ("GET", "/v1/grasp-sets/0", {}, 422),
         ("GET", "/v1/grasp-sets/123456789", {}, 404),
         ("GET", "/v1/grasp-sets/123456789/candidates", {}, 404),
