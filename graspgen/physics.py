@@ -95,8 +95,9 @@ class SimConstants:
     #: Coulomb friction pad/part is the gripper's (or the job's) coefficient; torsional friction models a pad
     #: patch of this radius (m): MuJoCo's torsional coefficient is friction * radius
     patch_radius: float = 2.0e-3
-    #: contact softness (MuJoCo solref time constant, s, and damping ratio)
-    solref: tuple[float, float] = (0.004, 1.0)
+    #: contact softness (MuJoCo solref time constant, s, and damping ratio): twice the time step, the stiffest MuJoCo
+    #: keeps stable; softer contacts let gram-scale parts (a 1 g pin under 20 N) spin out between the pads
+    solref: tuple[float, float] = (0.002, 1.0)
     #: approach: step of the sweep (m) and the penetration forgiven (m): the decomposition is a little larger
     #: than the part, and the candidates' own collision check has already been exact on the sampled surface
     approach_step: float = 1.0e-3
