@@ -138,7 +138,7 @@ def test_idempotent_submission_runs_once(stack, pair):
 def test_cancel_a_running_job(stack, pair):
     svc, _, _ = stack
     obj, grip = pair
-    jid = svc.post("/v1/jobs", json={"object": obj, "gripper": grip, "params": {"points": 3000, "seed": 9}}).json()[
+    jid = svc.post("/v1/jobs", json={"object": obj, "gripper": grip, "params": {"points": 20000, "seed": 9}}).json()[
         "id"
     ]
     end = time.monotonic() + 60
@@ -176,7 +176,7 @@ def test_killed_worker_process_redelivers_without_a_second_version(stack, pair):
 
     svc, proc, log = stack
     obj, grip = pair
-    jid = svc.post("/v1/jobs", json={"object": obj, "gripper": grip, "params": {"points": 2000, "seed": 17}}).json()[
+    jid = svc.post("/v1/jobs", json={"object": obj, "gripper": grip, "params": {"points": 3000, "seed": 17}}).json()[
         "id"
     ]
     end = time.monotonic() + 60

@@ -85,7 +85,7 @@ def test_graspgen_serve_embedded_whole_flow(tmp_path):
                 ).status_code
                 == 201
             )
-            slow = c.post("/v1/jobs", json={"object": "box", "gripper": "pgn-80", "params": {"points": 3000}}).json()
+            slow = c.post("/v1/jobs", json={"object": "box", "gripper": "pgn-80", "params": {"points": 20000}}).json()
             waiting = c.post("/v1/jobs", json={"object": "box", "gripper": "pgn-80", "params": SMALL}).json()
             assert c.post(f"/v1/jobs/{waiting['id']}/cancel").json()["state"] == "cancelled"
             end = time.monotonic() + 60
