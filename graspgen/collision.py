@@ -287,6 +287,18 @@ def _popcount(v):
     return (v * np.uint64(0x0101010101010101)) >> np.uint64(56)
 
 
+@njit(cache=True, inline="always")
+def _node_axes_separate(xm, zm, xhr, hy, hzr, p0, p1, p2, y0v, y1v, y2v, z0v, z1v, z2v, cv0, cv1, cv2, nd):
+    """Whether one of the node's box axes v_i separates it from the region's box (centre (xm, 0, zm) and half
+    extents (xhr, hy, hzr) in the grasp frame): p_i, y_iv, z_iv = v_i . (X, Y, Z) at the roll, cv_i = v_i . (node
+    centre - midpoint)."""
+    if abs(xm * p0 + zm * z0v - cv0) > xhr * abs(p0) + hy * abs(y0v) + hzr * abs(z0v) + nd[12]:
+        return True
+    if abs(xm * p1 + zm * z1v - cv1) > xhr * abs(p1) + hy * abs(y1v) + hzr * abs(z1v) + nd[13]:
+        return True
+    return abs(xm * p2 + zm * z2v - cv2) > xhr * abs(p2) + hy * abs(y2v) + hzr * abs(z2v) + nd[14]
+
+
 @njit(cache=True)
 def _phase(
     F,
@@ -395,6 +407,11 @@ def _phase(
                 q0z = nd[3] * za + nd[4] * zb + nd[5] * zc
                 q1z = nd[6] * za + nd[7] * zb + nd[8] * zc
                 q2z = nd[9] * za + nd[10] * zb + nd[11] * zc
+                cv0 = cx * nd[3] + cy * nd[4] + cz * nd[5]
+                cv1 = cx * nd[6] + cy * nd[7] + cz * nd[8]
+                cv2 = cx * nd[9] + cy * nd[10] + cz * nd[11]
+                xm, xhr = 0.5 * (xr[r, 0] + xr[r, 1]), 0.5 * (xr[r, 1] - xr[r, 0])
+                zm, hzr = 0.5 * (zlo + zhi), 0.5 * (zhi - zlo)
                 for k in range(kmax):
                     bit = np.uint64(1) << np.uint64(k)
                     if sym:
@@ -405,24 +422,24 @@ def _phase(
                     yk = ck * yc0 + sk * zc0
                     zk = ck * zc0 - sk * yc0
                     ayk = abs(yk)
-                    eh = (
-                        nd[12] * abs(ck * q0y + sk * q0z)
-                        + nd[13] * abs(ck * q1y + sk * q1z)
-                        + nd[14] * abs(ck * q2y + sk * q2z)
-                    )
-                    ev = (
-                        nd[12] * abs(ck * q0z - sk * q0y)
-                        + nd[13] * abs(ck * q1z - sk * q1y)
-                        + nd[14] * abs(ck * q2z - sk * q2y)
-                    )
+                    y0v, y1v, y2v = ck * q0y + sk * q0z, ck * q1y + sk * q1z, ck * q2y + sk * q2z
+                    z0v, z1v, z2v = ck * q0z - sk * q0y, ck * q1z - sk * q1y, ck * q2z - sk * q2y
+                    eh = nd[12] * abs(y0v) + nd[13] * abs(y1v) + nd[14] * abs(y2v)
+                    ev = nd[12] * abs(z0v) + nd[13] * abs(z1v) + nd[14] * abs(z2v)
                     if ayk - eh > hy or zk + ev < zlo or zk - ev > zhi:
                         continue
                     if x_in and ayk + eh <= hy and zk - ev >= zlo and zk + ev <= zhi:
                         inside |= bit & todo
-                    else:
-                        reach |= bit
-                        if not x_in:
-                            break  # no roll can be wholly inside: descend
+                        continue
+                    # the node's own axes separate too (a surface patch is thin along its normal); pays off for
+                    # the palm only
+                    if not finger and _node_axes_separate(
+                        xm, zm, xhr, hy, hzr, p0, p1, p2, y0v, y1v, y2v, z0v, z1v, z2v, cv0, cv1, cv2, nd
+                    ):
+                        continue
+                    reach |= bit
+                    if not x_in:
+                        break  # no roll can be wholly inside: descend
             if inside:
                 mask |= inside & target
                 if mask == target:
