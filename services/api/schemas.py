@@ -142,6 +142,11 @@ class JobRequest(BaseModel):
             "examples": [
                 {"object": "ring-screw", "gripper": "pgn-80", "params": _PARAMS_EXAMPLE},
                 {"kind": "cluster", "grasp_set": 17, "params": {"k1": 8, "k2": 2, "seed": 1}},
+                {
+                    "object": "ring-screw",
+                    "gripper": "pgn-80",
+                    "params": {**_PARAMS_EXAMPLE, "validate": True, "select": "best-near-medoid", "density": 7850},
+                },
             ]
         },
     )
@@ -154,7 +159,12 @@ class JobRequest(BaseModel):
     params: dict[str, Any] | None = Field(
         None,
         description="generate: any of points, friction, safety_factor, rolls, k1, k2, inside, collision, seed; "
-        "cluster: k1, k2, seed",
+        "cluster: k1, k2, seed. Both: validate (bool, simulate every exported grasp in MuJoCo and repair failures), "
+        "select ('medoid' | 'best-near-medoid'), density (part density for validation, kg/m^3, 1..100000); "
+        "docs/QUALITY.md. A cluster job does not inherit these from its source set.",
+        examples=[
+            {"points": 10000, "k1": 16, "k2": 4, "validate": True, "select": "best-near-medoid", "density": 7850}
+        ],
     )
 
 
@@ -267,6 +277,7 @@ class GraspSetSummary(BaseModel):
                     "candidates": "/v1/grasp-sets/17/candidates",
                     "recording": "/v1/grasp-sets/17/recording",
                     "grasps": "/v1/grasp-sets/17/grasps",
+                    "preview": "/v1/grasp-sets/17/preview.png",
                     "catalogue": "/v1/catalogue/ring-screw/pgn-80?version=2",
                 },
             }

@@ -28,6 +28,8 @@ __all__ = [
     "etag_of",
     "ExportRef",
     "export_ref",
+    "PreviewRef",
+    "preview_ref",
     "dumps",
 ]
 
@@ -104,6 +106,7 @@ def summary_out(row: Any) -> dict[str, Any]:
             "candidates": base + "/candidates",
             "recording": base + "/recording",
             "grasps": base + "/grasps",
+            "preview": base + "/preview.png",
             "catalogue": f"/v1/catalogue/{row.object}/{row.gripper}?version={row.version}",
         },
     }
@@ -155,6 +158,28 @@ def export_ref(session: Session, grasp_set_id: int) -> ExportRef:
     if row is None:
         raise ApiError(404, "not-found", f"no grasp set {grasp_set_id}")
     return ExportRef(*row)
+
+
+@dataclass(frozen=True)
+class PreviewRef:
+    """What drawing a grasp set's preview needs: its export and its object version's file."""
+
+    id: int
+    export_key: str
+    object_file_key: str
+    object_units: str
+    object_format: str
+
+
+def preview_ref(session: Session, grasp_set_id: int) -> PreviewRef:
+    row = session.execute(
+        select(GraspSet.id, GraspSet.export_key, ObjectVersion.file_key, ObjectVersion.units, ObjectVersion.format)
+        .join(ObjectVersion, ObjectVersion.id == GraspSet.object_version_id)
+        .where(GraspSet.id == grasp_set_id)
+    ).first()
+    if row is None:
+        raise ApiError(404, "not-found", f"no grasp set {grasp_set_id}")
+    return PreviewRef(*row)
 
 
 def catalogue_entry(session: Session, object: str, gripper: str, version: int | None) -> ExportRef:

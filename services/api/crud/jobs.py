@@ -6,6 +6,7 @@ failed request leaves the database as it was.
 
 from __future__ import annotations
 
+import math
 import uuid
 from typing import Any
 
@@ -32,9 +33,49 @@ from services.worker.dispatch import Dispatcher, DispatchError
 from ..problems import ApiError
 from ..schemas import BulkRequest, JobRequest
 
-__all__ = ["submit_job", "submit_bulk", "job_out", "get_job", "cancel_job", "CLUSTER_PARAMS"]
+__all__ = ["submit_job", "submit_bulk", "job_out", "get_job", "cancel_job", "CLUSTER_PARAMS", "QUALITY_PARAMS"]
 
 CLUSTER_PARAMS = ("k1", "k2", "seed")
+#: job params beyond graspgen.Params (docs/QUALITY.md): keyword arguments of graspgen.generate / recluster
+QUALITY_PARAMS = ("validate", "select", "density")
+#: the core's accepted part density range, kg/m^3 (graspgen.pipeline checks the same)
+DENSITY_RANGE = (1.0, 100_000.0)
+
+
+def split_quality(given: dict[str, Any] | None) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(core params, quality params) of a job's params; quality params are checked here so that a bad value is a
+    422 at submission. Only non-default values are kept, so a job without them has the same params (and params_key)
+    as before: `validate` only when true, `select` only when not "medoid", `density` only with `validate`."""
+    from graspgen.quality import SELECT_MODES
+
+    core = dict(given or {})
+    q = {k: core.pop(k) for k in QUALITY_PARAMS if k in core}
+    validate = q.get("validate", False)
+    if not isinstance(validate, bool):
+        raise InvalidParameterError(f"validate must be true or false, got {validate!r}", field="validate")
+    select_ = q.get("select", "medoid")
+    if not isinstance(select_, str) or select_ not in SELECT_MODES:
+        raise InvalidParameterError(f"select must be one of {', '.join(SELECT_MODES)}, got {select_!r}", field="select")
+    density = q.get("density")
+    if density is not None:
+        lo, hi = DENSITY_RANGE
+        if (
+            isinstance(density, bool)
+            or not isinstance(density, (int, float))
+            or not math.isfinite(density)
+            or not lo <= density <= hi
+        ):
+            raise InvalidParameterError(
+                f"density must be a number between {lo:g} and {hi:g} kg/m^3, got {density!r}", field="density"
+            )
+    out: dict[str, Any] = {}
+    if validate:
+        out["validate"] = True
+        if density is not None:
+            out["density"] = float(density)
+    if select_ != "medoid":
+        out["select"] = select_
+    return core, out
 
 
 def _object_version(session: Session, name: str, version: int | None) -> ObjectVersion:
@@ -62,8 +103,9 @@ def _gripper_version(session: Session, name: str, version: int | None) -> Grippe
 
 
 def _effective_params(given: dict[str, Any] | None, spec: dict[str, Any]) -> dict[str, Any]:
-    p = Params.from_dict(given)  # InvalidParameterError -> 422
-    return p.to_dict(friction=p.friction if p.friction is not None else float(spec["friction"]))
+    core, quality = split_quality(given)
+    p = Params.from_dict(core)  # InvalidParameterError -> 422
+    return {**p.to_dict(friction=p.friction if p.friction is not None else float(spec["friction"])), **quality}
 
 
 def _resolve_generate(session: Session, item: dict[str, Any]) -> dict[str, Any]:
@@ -88,14 +130,18 @@ def _resolve_cluster(session: Session, body: JobRequest) -> dict[str, Any]:
     if source is None:
         raise ApiError(422, "unknown-grasp-set", f"there is no grasp set {body.grasp_set}", field="grasp_set")
     given = dict(body.params or {})
-    unknown = sorted(set(given) - set(CLUSTER_PARAMS))
+    unknown = sorted(set(given) - set(CLUSTER_PARAMS) - set(QUALITY_PARAMS))
     if unknown:
         raise InvalidParameterError(
-            "a cluster job takes only k1, k2 and seed; not " + ", ".join(unknown), field=unknown[0]
+            "a cluster job takes only k1, k2, seed, validate, select and density; not " + ", ".join(unknown),
+            field=unknown[0],
         )
+    given, quality = split_quality(given)
     if source.candidates_key is None:
         raise ApiError(422, "no-candidates", f"grasp set {source.id} has no stored candidates", field="grasp_set")
-    merged = Params.from_dict({**source.params, **given}).to_dict()
+    # quality options are the cluster job's own, not inherited from the source set
+    base, _ = split_quality(source.params)
+    merged = {**Params.from_dict({**base, **given}).to_dict(), **quality}
     return {
         "object_version_id": source.object_version_id,
         "gripper_version_id": source.gripper_version_id,
