@@ -38,15 +38,40 @@ from services.common.models import (
 from services.common.settings import Settings
 from services.common.storage import Storage, make_storage
 
-__all__ = ["JobRunner", "STAGE_WEIGHTS"]
+__all__ = ["JobRunner", "STAGE_WEIGHTS", "QUALITY_KWARGS", "stage_weights"]
 
 log = logging.getLogger(__name__)
 
-#: share of a job's progress bar per core stage (the core reports a fraction within each stage)
+#: share of a job's progress bar per core stage (the core reports a fraction within each stage); "validate" (MuJoCo
+#: simulation of the exported grasps) runs only with params.validate and is left out, the rest rescaled, otherwise
 STAGE_WEIGHTS: dict[str, dict[str, float]] = {
-    "generate": {"load": 0.02, "sample": 0.08, "pairs": 0.35, "collision": 0.40, "cluster": 0.10, "export": 0.05},
-    "cluster": {"load": 0.05, "cluster": 0.85, "export": 0.10},
+    "generate": {
+        "load": 0.02,
+        "sample": 0.06,
+        "pairs": 0.26,
+        "collision": 0.30,
+        "cluster": 0.08,
+        "validate": 0.24,
+        "export": 0.04,
+    },
+    "cluster": {"load": 0.05, "cluster": 0.45, "validate": 0.45, "export": 0.05},
 }
+
+#: job params passed to graspgen.generate / recluster as keyword arguments, not through graspgen.Params
+QUALITY_KWARGS = ("validate", "select", "density")
+
+
+def stage_weights(kind: str, validate: bool) -> dict[str, float]:
+    """The stage weights of one job, summing to 1: without validation the "validate" share goes to the others."""
+    weights = dict(STAGE_WEIGHTS.get(kind, STAGE_WEIGHTS["generate"]))
+    if not validate:
+        weights.pop("validate", None)
+    total = sum(weights.values())
+    return {k: w / total for k, w in weights.items()}
+
+
+def _quality_kwargs(params: dict[str, Any]) -> dict[str, Any]:
+    return {k: params[k] for k in QUALITY_KWARGS if params.get(k) is not None}
 
 
 class _TimeLimitError(Exception):
@@ -229,10 +254,11 @@ class JobRunner:
         try:
             rec.log("job", rr.TextDocument(self._metadata_markdown(inp), media_type=rr.MediaType.MARKDOWN), static=True)
             progress("load", 0.0)
+            p = inp.params
+            quality = _quality_kwargs(p)
+            part = tmp / f"part.{inp.object_format}"  # the format is a whitelisted token, never a user path
             if inp.kind == "generate":
-                part = tmp / f"part.{inp.object_format}"  # the format is a whitelisted token, never a user path
                 self.storage.download(inp.object_file_key, part)
-                p = inp.params
                 gs = graspgen.generate(
                     str(part),
                     inp.spec,
@@ -250,11 +276,16 @@ class JobRunner:
                     progress=progress,
                     object_name=inp.object_name,
                     object_version=inp.object_version,
+                    **quality,
                 )
             elif inp.kind == "cluster":
                 assert inp.source_candidates_key and inp.source_export_key
                 npz = self.storage.download(inp.source_candidates_key, tmp / "source-candidates.npz")
                 previous = json.loads(self.storage.get_bytes(inp.source_export_key))
+                if quality.get("validate") or quality.get("select", "medoid") != "medoid":
+                    # validation and quality scoring need the part; recluster loads it in metres from `units`
+                    self.storage.download(inp.object_file_key, part)
+                    quality.update(mesh=str(part), units=inp.units)
                 gs = graspgen.recluster(
                     str(npz),
                     previous,
@@ -263,6 +294,7 @@ class JobRunner:
                     seed=inp.params["seed"],
                     recording=rec,
                     progress=progress,
+                    **quality,
                 )
             else:
                 raise ValueError(f"unknown job kind {inp.kind!r}")
@@ -432,7 +464,7 @@ class _Progress:
     def __init__(self, runner: JobRunner, inp: _Inputs) -> None:
         self.runner = runner
         self.jid = inp.job_id
-        self.weights = STAGE_WEIGHTS.get(inp.kind, STAGE_WEIGHTS["generate"])
+        self.weights = stage_weights(inp.kind, bool(inp.params.get("validate")))
         self.interval = runner.settings.progress_interval_s
         self.deadline = time.monotonic() + runner.settings.job_soft_time_limit_s
         self.last_stage: str | None = None
