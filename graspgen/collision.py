@@ -46,6 +46,8 @@ _CHUNK = 64  # candidates per parallel task
 _FINGER_ANGULAR = 4  # per-roll node tests for the fingers once at most this many (symmetric pairs of) rolls are open
 _GUARD = 1e-9  # relative guard band of the point-level shortcuts
 _STATS = 8  # counters per chunk: see free_rolls_stats
+_MEMO_SLOTS = 2  # finger blockers remembered per contact cell
+_MEMO_CELLS = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -320,12 +322,54 @@ def _phase(
     stack,
     cache,
     cache_pos,
+    memo,
+    grid,
+    cell0,
+    cell1,
+    probe,
+    walk,
     st,
 ):
-    """Rolls within `target` blocked by regions r0..r1-1 (fingers: r0, r1 = 0, 2; palm: 2, 3)."""
+    """Rolls within `target` blocked by regions r0..r1-1 (fingers: r0, r1 = 0, 2; palm: 2, 3): with `probe`, by
+    the remembered blockers; with `walk`, by a traversal of the tree.
+
+    memo[0, cell] holds the points that last blocked a finger whose contact lies in that grid cell, memo[1, cell]
+    those that last blocked a palm whose centre lies in it (shared by the threads: racy hints, never trusted
+    without the exact test); cell0, cell1 are the cells of this candidate's contacts, -1 for none."""
     n = X.shape[0]
     mask = np.uint64(0)
-    for c in range(cache.shape[0]):
+    slots = memo.shape[2]
+    if probe and finger:
+        for cell in (cell0, cell1):
+            if cell < 0:
+                continue
+            for slot in range(slots):
+                p = memo[0, cell, slot]
+                if p < 0:
+                    continue
+                st[6] += 1
+                mask |= _point_mask(X, Y, Z, p, F, reg, r0, r1, xr, cos_k, sin_k, half, gfac, target & ~mask)
+                if mask == target:
+                    st[7] += 1
+                    return mask, cache_pos
+    elif probe:
+        zm = 0.5 * (reg[r0, _ZLO] + reg[r0, _ZHI])
+        for k in range(cos_k.shape[0]):
+            if not (target & ~mask & (np.uint64(1) << np.uint64(k))):
+                continue
+            cell = _palm_cell(grid, F, zm, cos_k[k], sin_k[k])
+            if cell < 0:
+                continue
+            for slot in range(slots):
+                p = memo[1, cell, slot]
+                if p < 0:
+                    continue
+                st[6] += 1
+                mask |= _point_mask(X, Y, Z, p, F, reg, r0, r1, xr, cos_k, sin_k, half, gfac, target & ~mask)
+                if mask == target:
+                    st[7] += 1
+                    return mask, cache_pos
+    for c in range(cache.shape[0] if probe else 0):
         p = cache[c]
         if p < 0:
             continue
@@ -334,6 +378,8 @@ def _phase(
         if mask == target:
             st[5] += 1
             return mask, cache_pos
+    if not walk:
+        return mask, cache_pos
     ax, ay, az = F[3], F[4], F[5]
     ya, yb, yc = F[6], F[7], F[8]
     za, zb, zc = F[9], F[10], F[11]
@@ -461,6 +507,15 @@ def _phase(
                     mask |= m
                     cache[cache_pos] = p
                     cache_pos = (cache_pos + 1) % cache.shape[0]
+                    if finger:
+                        # finger 0 lies on the -x side of the midpoint, finger 1 on the +x side
+                        x = (X[p] - F[0]) * ax + (Y[p] - F[1]) * ay + (Z[p] - F[2]) * az
+                        _remember(memo, 0, cell0 if x < 0.0 else cell1, p)
+                    else:
+                        zm = 0.5 * (reg[r0, _ZLO] + reg[r0, _ZHI])
+                        for k in range(nrolls):
+                            if m & (np.uint64(1) << np.uint64(k)):
+                                _remember(memo, 1, _palm_cell(grid, F, zm, cos_k[k], sin_k[k]), p)
                     if mask == target:
                         return mask, cache_pos
         else:
@@ -468,6 +523,35 @@ def _phase(
             stack[top + 1] = 2 * node
             top += 2
     return mask, cache_pos
+
+
+@njit(cache=True, inline="always")
+def _remember(memo, kind, cell, p):
+    if cell >= 0 and memo[kind, cell, 0] != p:
+        for slot in range(memo.shape[2] - 1, 0, -1):
+            memo[kind, cell, slot] = memo[kind, cell, slot - 1]
+        memo[kind, cell, 0] = p
+
+
+@njit(cache=True, inline="always")
+def _palm_cell(grid, F, zm, ck, sk):
+    """Memo cell of the palm's centre at the roll (cos, sin) = (ck, sk): midpoint + zm Z."""
+    zx = ck * F[9] - sk * F[6]
+    zy = ck * F[10] - sk * F[7]
+    zz = ck * F[11] - sk * F[8]
+    return _cell(grid, F[0] + zm * zx, F[1] + zm * zy, F[2] + zm * zz)
+
+
+@njit(cache=True, inline="always")
+def _cell(grid, x, y, z):
+    """Index of the memo cell holding (x, y, z); grid = origin xyz, 1 / cell size, dims xyz. -1 outside."""
+    i = int(np.floor((x - grid[0]) * grid[3]))
+    j = int(np.floor((y - grid[1]) * grid[3]))
+    k = int(np.floor((z - grid[2]) * grid[3]))
+    nx, ny, nz = int(grid[4]), int(grid[5]), int(grid[6])
+    if i < 0 or j < 0 or k < 0 or i >= nx or j >= ny or k >= nz:
+        return -1
+    return (i * ny + j) * nz + k
 
 
 @njit(parallel=True, cache=True)
@@ -489,6 +573,8 @@ def _free_rolls_kernel(
     gfac,
     full,
     switch,
+    memo,
+    grid,
     out,
     stats,
 ):
@@ -513,30 +599,46 @@ def _free_rolls_kernel(
             F[6], F[7], F[8] = yx, yy, yz
             F[9], F[10], F[11] = zx, zy, zz
             _x_ranges(xr, inside[q], widths[q], model_f)
-            # the fingers first: small regions, and they settle most candidates
-            blocked, cache_pos[0] = _phase(
-                F,
-                X,
-                Y,
-                Z,
-                nodes,
-                leaves,
-                reg,
-                0,
-                2,
-                xr,
-                cos_k,
-                sin_k,
-                half,
-                gfac,
-                full,
-                True,
-                stack,
-                caches[0],
-                cache_pos[0],
-                st,
-            )
-            if blocked != full and nr > 2:
+            hw = 0.5 * widths[q]
+            cell0 = _cell(grid, F[0] - hw * ax, F[1] - hw * ay, F[2] - hw * az)
+            cell1 = _cell(grid, F[0] + hw * ax, F[1] + hw * ay, F[2] + hw * az)
+            # the remembered blockers first (fingers, then palm), then the tree (fingers, then palm): the
+            # fingers are small regions and settle most candidates
+            blocked = np.uint64(0)
+            for walk in (False, True):
+                if blocked == full:
+                    break
+                more, cache_pos[0] = _phase(
+                    F,
+                    X,
+                    Y,
+                    Z,
+                    nodes,
+                    leaves,
+                    reg,
+                    0,
+                    2,
+                    xr,
+                    cos_k,
+                    sin_k,
+                    half,
+                    gfac,
+                    full & ~blocked,
+                    True,
+                    stack,
+                    caches[0],
+                    cache_pos[0],
+                    memo,
+                    grid,
+                    cell0,
+                    cell1,
+                    not walk,
+                    walk,
+                    st,
+                )
+                blocked |= more
+                if blocked == full or nr == 2:
+                    continue
                 more, cache_pos[1] = _phase(
                     F,
                     X,
@@ -557,6 +659,12 @@ def _free_rolls_kernel(
                     stack,
                     caches[1],
                     cache_pos[1],
+                    memo,
+                    grid,
+                    -1,
+                    -1,
+                    not walk,
+                    walk,
                     st,
                 )
                 blocked |= more
@@ -587,7 +695,18 @@ def _prepare(points, normals, model, rolls):
     full = np.uint64((1 << rolls) - 1) if rolls < 64 else np.uint64(0xFFFFFFFFFFFFFFFF)
     model_f = np.array([model.finger_thickness, model.stroke, model.min_width, model.clearance, model.inner_margin])
     soa = tuple(np.ascontiguousarray(Ps[:, k]) for k in range(3))
-    return soa, nodes, leaves, _regions(model), model_f, cos_k, sin_k, half, gfac, full
+    # memo cells about as wide as a leaf's patch, at most _MEMO_CELLS of them
+    lo = P.min(axis=0)
+    ext = np.maximum(P.max(axis=0) - lo, 1e-12)
+    h = max(4.0 * float(np.mean(nodes[leaves:, 12] + nodes[leaves:, 13])), 1e-12)
+    h = max(h, float(np.prod(ext) / _MEMO_CELLS) ** (1.0 / 3.0))
+    dims = np.floor(ext / h).astype(np.int64) + 1
+    while int(np.prod(dims)) > _MEMO_CELLS:
+        h *= 1.25
+        dims = np.floor(ext / h).astype(np.int64) + 1
+    grid = np.array([lo[0], lo[1], lo[2], 1.0 / h, dims[0], dims[1], dims[2]], dtype=np.float64)
+    memo = np.full((2, int(np.prod(dims)), _MEMO_SLOTS), -1, dtype=np.int64)
+    return soa, nodes, leaves, _regions(model), model_f, cos_k, sin_k, half, gfac, full, memo, grid
 
 
 def _run(points, normals, midpoints, axes, widths, inside, model, rolls):
@@ -599,7 +718,9 @@ def _run(points, normals, midpoints, axes, widths, inside, model, rolls):
     stats = np.zeros(((m + _CHUNK - 1) // _CHUNK, _STATS), dtype=np.int64)
     if m == 0 or len(points) == 0:
         return np.ones((m, rolls), dtype=bool), stats
-    soa, nodes, leaves, reg, model_f, cos_k, sin_k, half, gfac, full = _prepare(points, normals, model, rolls)
+    soa, nodes, leaves, reg, model_f, cos_k, sin_k, half, gfac, full, memo, grid = _prepare(
+        points, normals, model, rolls
+    )
     out = np.zeros(m, dtype=np.uint64)
     with numba.parallel_chunksize(1):
         _free_rolls_kernel(
@@ -618,6 +739,8 @@ def _run(points, normals, midpoints, axes, widths, inside, model, rolls):
             gfac,
             full,
             ROLL_REFERENCE_SWITCH,
+            memo,
+            grid,
             out,
             stats,
         )
@@ -648,5 +771,14 @@ def free_rolls_stats(points, normals, midpoints, axes, widths, inside, model, ro
     """free_rolls and its work counters, summed over candidates: finger node visits, finger point tests, palm
     node visits, palm point tests, cached-blocker tests, phases settled by the finger cache alone."""
     fr, stats = _run(points, normals, midpoints, axes, widths, inside, model, rolls)
-    names = ("finger_nodes", "finger_points", "palm_nodes", "palm_points", "cache_tests", "cache_settled", "_6", "_7")
+    names = (
+        "finger_nodes",
+        "finger_points",
+        "palm_nodes",
+        "palm_points",
+        "cache_tests",
+        "cache_settled",
+        "memo_tests",
+        "memo_settled",
+    )
     return fr, {k: int(v) for k, v in zip(names, stats.sum(axis=0), strict=True) if not k.startswith("_")}
