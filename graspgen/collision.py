@@ -45,6 +45,7 @@ _CACHE = 8  # recent blockers kept per thread and phase
 _CHUNK = 64  # candidates per parallel task
 _FINGER_ANGULAR = 4  # per-roll node tests for the fingers once at most this many (symmetric pairs of) rolls are open
 _GUARD = 1e-9  # relative guard band of the point-level shortcuts
+_NODE = 24  # floats per tree node: see _build_tree
 _STATS = 8  # counters per chunk: see free_rolls_stats
 _MEMO_SLOTS = 2  # finger blockers remembered per contact cell
 _MEMO_CELLS = 1 << 20
@@ -121,13 +122,15 @@ def _build_tree(P, leaves, pad):
     leaves from `leaves` on. Node k at depth d (t = k - 2^d) holds the points [t n >> d, (t + 1) n >> d) of the
     permuted order; each inner node splits its points at the median along their principal axis.
 
-    Returns (perm, nodes): nodes (2 leaves, 16) = oriented box (centre xyz, three unit axes as rows, half
-    extents) and the radius of the ball around the centre that holds the node's points, all padded by `pad`.
+    Returns (perm, nodes): nodes (2 leaves, _NODE) = oriented box (centre xyz, three unit axes as rows, half
+    extents), the radius of the ball around that centre that holds the node's points, and the axis-aligned box
+    (centre xyz, half extents xyz), all padded by `pad`. The oriented box suits surface patches, the axis-aligned
+    one the corners and edges of parts modelled along their axes; the tests use both.
     """
     n = P.shape[0]
     Q = P.copy()
     perm = np.arange(n)
-    nodes = np.zeros((2 * leaves, 16))
+    nodes = np.zeros((2 * leaves, _NODE))
     depth = 0
     cov = np.zeros((3, 3))
     for node in range(1, 2 * leaves):
@@ -172,6 +175,13 @@ def _build_tree(P, leaves, pad):
             nodes[node, 3 + 3 * i : 6 + 3 * i] = ax[i]
             nodes[node, 12 + i] = 0.5 * (hi[i] - lo[i]) + pad
         nodes[node, 15] = np.sqrt(rho) + pad
+        for a in range(3):
+            a_lo, a_hi = np.inf, -np.inf
+            for p in range(s, e):
+                a_lo = min(a_lo, Q[p, a])
+                a_hi = max(a_hi, Q[p, a])
+            nodes[node, 16 + a] = 0.5 * (a_lo + a_hi)
+            nodes[node, 19 + a] = 0.5 * (a_hi - a_lo) + pad
         if node < leaves:
             key = np.empty(cnt)
             for p in range(s, e):
@@ -403,8 +413,13 @@ def _phase(
         p1 = nd[6] * ax + nd[7] * ay + nd[8] * az
         p2 = nd[9] * ax + nd[10] * ay + nd[11] * az
         xh = min(nd[12] * abs(p0) + nd[13] * abs(p1) + nd[14] * abs(p2), rho)
-        x_lo = xc - xh
-        x_hi = xc + xh
+        bx = nd[16] - F[0]
+        by = nd[17] - F[1]
+        bz = nd[18] - F[2]
+        xb = bx * ax + by * ay + bz * az
+        xbh = nd[19] * abs(ax) + nd[20] * abs(ay) + nd[21] * abs(az)
+        x_lo = max(xc - xh, xb - xbh)
+        x_hi = min(xc + xh, xb + xbh)
         yc0 = cx * ya + cy * yb + cz * yc
         zc0 = cx * za + cy * zb + cz * zc
         dp = np.sqrt(yc0 * yc0 + zc0 * zc0)
@@ -456,6 +471,8 @@ def _phase(
                 cv0 = cx * nd[3] + cy * nd[4] + cz * nd[5]
                 cv1 = cx * nd[6] + cy * nd[7] + cz * nd[8]
                 cv2 = cx * nd[9] + cy * nd[10] + cz * nd[11]
+                yb0 = bx * ya + by * yb + bz * yc
+                zb0 = bx * za + by * zb + bz * zc
                 xm, xhr = 0.5 * (xr[r, 0] + xr[r, 1]), 0.5 * (xr[r, 1] - xr[r, 0])
                 zm, hzr = 0.5 * (zlo + zhi), 0.5 * (zhi - zlo)
                 for k in range(kmax):
@@ -467,14 +484,30 @@ def _phase(
                     ck, sk = cos_k[k], sin_k[k]
                     yk = ck * yc0 + sk * zc0
                     zk = ck * zc0 - sk * yc0
-                    ayk = abs(yk)
                     y0v, y1v, y2v = ck * q0y + sk * q0z, ck * q1y + sk * q1z, ck * q2y + sk * q2z
                     z0v, z1v, z2v = ck * q0z - sk * q0y, ck * q1z - sk * q1y, ck * q2z - sk * q2y
                     eh = nd[12] * abs(y0v) + nd[13] * abs(y1v) + nd[14] * abs(y2v)
                     ev = nd[12] * abs(z0v) + nd[13] * abs(z1v) + nd[14] * abs(z2v)
-                    if ayk - eh > hy or zk + ev < zlo or zk - ev > zhi:
+                    # the axis-aligned box along the roll's Y and Z: keep the tighter bound of the two boxes
+                    ybk = ck * yb0 + sk * zb0
+                    zbk = ck * zb0 - sk * yb0
+                    ebh = (
+                        nd[19] * abs(ck * ya + sk * za)
+                        + nd[20] * abs(ck * yb + sk * zb)
+                        + nd[21] * abs(ck * yc + sk * zc)
+                    )
+                    ebv = (
+                        nd[19] * abs(ck * za - sk * ya)
+                        + nd[20] * abs(ck * zb - sk * yb)
+                        + nd[21] * abs(ck * zc - sk * yc)
+                    )
+                    y_lo = max(yk - eh, ybk - ebh)
+                    y_hi = min(yk + eh, ybk + ebh)
+                    z_lo = max(zk - ev, zbk - ebv)
+                    z_hi = min(zk + ev, zbk + ebv)
+                    if y_lo > hy or y_hi < -hy or z_hi < zlo or z_lo > zhi:
                         continue
-                    if x_in and ayk + eh <= hy and zk - ev >= zlo and zk + ev <= zhi:
+                    if x_in and y_lo >= -hy and y_hi <= hy and z_lo >= zlo and z_hi <= zhi:
                         inside |= bit & todo
                         continue
                     # the node's own axes separate too (a surface patch is thin along its normal); pays off for
