@@ -22,12 +22,18 @@ from .params import Params
 from .parts import Part, load_part
 from .transforms import grasp_frames, roll_angles_rad
 
-__all__ = ["generate", "recluster", "STAGES", "choose_roll"]
+__all__ = ["generate", "recluster", "STAGES", "MAX_PAIR_CANDIDATES", "choose_roll"]
 
 #: the stages reported to progress callbacks, in order ("validate" only with validate=True)
 STAGES = ("load", "sample", "pairs", "collision", "cluster", "validate", "export")
 #: the collision stage reports progress this many times
 _COLLISION_BATCHES = 10
+#: pairs passing (a)-(c) beyond this are refused before the collision stage allocates for them (about 8 GB): all of
+#: them are held at once. The thick ring at 30,000 points passes ~14 M pairs and peaks at 2.9 GB; at 100,000 points
+#: ~150 M pairs would need more than 30 GB
+MAX_PAIR_CANDIDATES = 40_000_000
+#: measured peak bytes per pair passing (a)-(c), through collision and clustering (thick ring, 30k points)
+_BYTES_PER_PAIR = 210
 
 Progress = Callable[[str, float], None]
 
@@ -122,6 +128,14 @@ def generate(
         finger_thickness=spec.finger_thickness,
     )
     timings["pairs"] = time.perf_counter() - t0
+    if len(pairs.i) > MAX_PAIR_CANDIDATES:
+        gb = len(pairs.i) * _BYTES_PER_PAIR / 1e9
+        raise InvalidParameterError(
+            f"{len(pairs.i):,} pairs pass criteria (a)-(c) at {len(pts):,} points, more than the "
+            f"{MAX_PAIR_CANDIDATES:,} this run may hold (about {gb:.0f} GB): use fewer points (pairs grow with the "
+            f"square of the points; about {int(len(pts) * (MAX_PAIR_CANDIDATES / len(pairs.i)) ** 0.5):,} would fit)",
+            field="points",
+        )
     report("pairs", 1.0)
 
     report("collision", 0.0)

@@ -283,3 +283,14 @@ def test_every_exported_grasp_satisfies_all_criteria(part, friction, safety, rol
     assert gs.stats["candidates"] == len(gs.candidates)
     rej = gs.stats["rejected"]
     assert sum(rej.values()) + gs.stats["candidates"] == gs.stats["pairs_total"]
+
+
+def test_too_many_pairs_is_a_clear_error_before_collision(monkeypatch):
+    import graspgen.pipeline as pipeline
+
+    monkeypatch.setattr(pipeline, "MAX_PAIR_CANDIDATES", 100)
+    seen = []
+    with pytest.raises(InvalidParameterError, match=r"pass criteria \(a\)-\(c\) at 500 points.*use fewer points") as e:
+        graspgen.generate(_box(), GRIPPER, units="m", points=500, progress=lambda s, f: seen.append(s))
+    assert e.value.field == "points"
+    assert "collision" not in seen  # refused before the collision stage allocates
