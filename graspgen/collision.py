@@ -552,10 +552,22 @@ def _phase(
                     if mask == target:
                         return mask, cache_pos
         else:
-            stack[top] = 2 * node + 1
-            stack[top + 1] = 2 * node
+            near_c, far_c = 2 * node, 2 * node + 1
+            if finger and _axis_dist2(nodes[far_c], F) < _axis_dist2(nodes[near_c], F):
+                # the child nearer the axis first: a blocker there blocks most rolls
+                near_c, far_c = far_c, near_c
+            stack[top] = far_c
+            stack[top + 1] = near_c
             top += 2
     return mask, cache_pos
+
+
+@njit(cache=True, inline="always")
+def _axis_dist2(nd, F):
+    """Squared distance of a node's centre from the closing axis."""
+    cx, cy, cz = nd[0] - F[0], nd[1] - F[1], nd[2] - F[2]
+    x = cx * F[3] + cy * F[4] + cz * F[5]
+    return cx * cx + cy * cy + cz * cz - x * x
 
 
 @njit(cache=True, inline="always")
