@@ -1,10 +1,18 @@
 """Core benchmark (issue 3): the pipeline per part at 10,000 points, (a)-(c) against plain numpy, and scaling.
 
-    .venv/bin/python bench/bench_core.py            # everything (several minutes)
-    .venv/bin/python bench/bench_core.py --quick    # example parts and tless_04 only, no 100k run
+    .venv/bin/python bench/bench_core.py                  # everything (tens of minutes)
+    .venv/bin/python bench/bench_core.py --quick          # example parts and tless_04 only, no 100k run
+    .venv/bin/python bench/bench_core.py --kernels-only   # only the kernel tables (criteria (a)-(d)), see below
 
 Each measurement runs in its own process (peak memory = that process's ru_maxrss), warm: the process first runs the
 pipeline once on a small part so numba's compiled code is loaded. Prints Markdown tables.
+
+The kernel tables call the kernels directly (antipodal_pairs, free_rolls) the way the pipeline does, on tless_04
+and the issue's thick ring (annulus 10-30 mm, 20 mm high, 64 sections), in `swept` and `paper` mode, and report CPU
+time (time.process_time, summed over numba's threads) beside wall time, because the machine's cores are shared,
+plus the work counts of the collision kernel (tree nodes visited and points tested per candidate). At 100,000
+points the (a)-(c) pairs no longer fit in memory for the collision stage; there the collision kernel runs on an
+evenly spread subset of the candidates (contiguous blocks, so their order stays the pipeline's), marked "subset".
 """
 
 from __future__ import annotations
@@ -76,9 +84,196 @@ def _child(spec: dict) -> dict:
     return out
 
 
-def _run(spec: dict) -> dict:
+#: the issue's thick ring (the example part "thick-ring" has 128 sections)
+RING_SPEC = {"kind": "ring", "name": "ring (issue)", "units": "m"}
+#: the collision kernel runs on at most this many candidates per measurement (memory: ~60 bytes each)
+KERNEL_MAX_CANDIDATES = 16_000_000
+
+
+def _numpy_abc(p, n, stroke, cos_lim, rows=128):
+    """Criteria (a)-(c) in plain numpy, blocks of rows against all later points: per-criterion counts."""
+    import numpy as np
+
+    total = acc = rej_stroke = rej_outside = 0
+    for i0 in range(0, len(p), rows):
+        i1 = min(i0 + rows, len(p))
+        d = p[None, :, :] - p[i0:i1, None, :]  # (rows, n, 3): d[r, j] = p[j] - p[i0 + r]
+        later = np.arange(len(p))[None, :] > np.arange(i0, i1)[:, None]
+        dist = np.sqrt(np.einsum("rjk,rjk->rj", d, d))
+        u = np.einsum("rjk,rk->rj", d, n[i0:i1])
+        v = np.einsum("rjk,jk->rj", d, n)
+        in_stroke = later & (dist <= stroke)
+        oriented = in_stroke & (u < 0) & (v > 0)
+        ok = oriented & (-u >= cos_lim * dist) & (v >= cos_lim * dist)
+        total += int(later.sum())
+        rej_stroke += int((later & ~in_stroke).sum())
+        rej_outside += int((in_stroke & ~oriented).sum())
+        acc += int(ok.sum())
+    return {"total": total, "accepted": acc, "stroke": rej_stroke, "outside": rej_outside}
+
+
+def _kernel_child(spec: dict) -> dict:
+    import resource
+
+    import numpy as np
+    import trimesh
+
+    from graspgen import antipodal, collision
+    from graspgen.gripper import GripperSpec
+    from graspgen.parts import load_part
+    from graspgen.sampling import sample_surface
+
+    gripper = GripperSpec(**{k: v for k, v in GRIPPER.items() if k not in ("min_width", "palm_width")})
+    if spec["kind"] == "ring":
+        part = load_part(trimesh.creation.annulus(r_min=0.01, r_max=0.03, height=0.02, sections=64), units="m")
+    else:
+        part = load_part(spec["path"], units=spec["units"], name=spec["name"])
+    kw = dict(
+        stroke=gripper.stroke,
+        min_width=gripper.min_width,
+        friction=gripper.friction,
+        safety_factor=1.5,
+        inside=False,
+        finger_thickness=gripper.finger_thickness,
+    )
+
+    def clock():
+        return time.perf_counter(), time.process_time()
+
+    t0 = clock()
+    s = sample_surface(part, spec["points"], seed=0)
+    order = antipodal.grid_order(s.points, antipodal.pair_cell_size(gripper.stroke, False, gripper.finger_thickness))
+    pts, nrm = s.points[order], s.normals[order]
+    t1 = clock()
+    out = {"name": spec["name"], "points": len(pts), "sample_wall": t1[0] - t0[0], "sample_cpu": t1[1] - t0[1]}
+    # warm: load the compiled kernels on a small slice
+    small = antipodal.antipodal_pairs(pts[:400], nrm[:400], **kw)
+    sm = 0.5 * (pts[small.i] + pts[small.j])
+    sd = pts[small.j] - pts[small.i]
+    for mode in ("swept", "paper"):
+        model = collision.collision_model(gripper, mode)
+        w = np.linalg.norm(sd, axis=1)
+        collision.free_rolls_stats(pts, nrm, sm, sd / w[:, None], w, small.inside, model, 16)
+    t0 = clock()
+    res = antipodal.antipodal_pairs(pts, nrm, **kw)
+    t1 = clock()
+    out.update(
+        pairs_total=res.pairs_total,
+        rej_stroke=res.rejected_stroke,
+        rej_outside=res.rejected_outside,
+        rej_friction=res.rejected_friction,
+        pairs=len(res.i),
+        pairs_wall=t1[0] - t0[0],
+        pairs_cpu=t1[1] - t0[1],
+    )
+    sel = np.arange(len(res.i))
+    if len(sel) > KERNEL_MAX_CANDIDATES:  # evenly spread contiguous blocks
+        blocks = np.arange(0, len(sel), 4096)
+        keep = blocks[:: int(math.ceil(len(sel) / KERNEL_MAX_CANDIDATES))]
+        sel = (keep[:, None] + np.arange(4096)[None, :]).ravel()
+        sel = sel[sel < len(res.i)]
+    out["collision_candidates"] = len(sel)
+    ci, cj, inside = res.i[sel], res.j[sel], res.inside[sel]
+    del res
+    for mode in ("swept", "paper"):
+        model = collision.collision_model(gripper, mode)
+        t0 = clock()
+        d = pts[cj] - pts[ci]
+        w = np.linalg.norm(d, axis=1)
+        fr, work = collision.free_rolls_stats(pts, nrm, 0.5 * (pts[ci] + pts[cj]), d / w[:, None], w, inside, model, 16)
+        t1 = clock()
+        out[mode] = {
+            "wall": t1[0] - t0[0],
+            "cpu": t1[1] - t0[1],
+            "free": int(fr.any(axis=1).sum()),
+            "free_rolls": int(fr.sum()),
+            "work": {k: v / max(len(sel), 1) for k, v in work.items()},
+        }
+        del fr, d, w
+    if spec.get("numpy"):
+        t0 = clock()
+        npy = _numpy_abc(pts, nrm, gripper.stroke, math.cos(antipodal.cone_half_angle_rad(gripper.friction, 1.5)))
+        t1 = clock()
+        out["numpy"] = {**npy, "wall": t1[0] - t0[0], "cpu": t1[1] - t0[1]}
+    out["peak_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    return out
+
+
+def _kernel_tables(quick: bool) -> None:
+    parts = [RING_SPEC]
+    if (SHARED / "tless_04.stl").is_file():
+        parts.insert(0, {"kind": "file", "name": "tless_04", "path": str(SHARED / "tless_04.stl"), "units": "mm"})
+    else:
+        print(f"(tless_04 not found at {SHARED}: the ring only)")
+    print(
+        "\nKernels (a)-(d) at 10,000 points, swept and paper collision (CPU = process time over both threads; "
+        "work = per candidate):\n"
+    )
+    print(
+        "| part | pairs total | rej. stroke | rej. outside | rej. friction | (a)-(c) pass | sample s | pairs s (CPU) | "
+        "swept: free | swept s (CPU) | paper: free | paper s (CPU) | (a)-(d) swept s (CPU) | swept work: nodes f+p, "
+        "points f+p, probes | peak MB | numpy (a)-(c) s (x) |"
+    )
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|")
+    rows = {}
+    for spec in parts:
+        r = _run({**spec, "points": 10_000, "numpy": True}, kernels=True)
+        rows[(spec["name"], 10_000)] = r
+        sw, pa, wk, npy = r["swept"], r["paper"], r["swept"]["work"], r["numpy"]
+        same = "" if npy["accepted"] == r["pairs"] and npy["outside"] == r["rej_outside"] else " MISMATCH"
+        print(
+            f"| {r['name']} | {r['pairs_total']:,} | {r['rej_stroke']:,} | {r['rej_outside']:,} | "
+            f"{r['rej_friction']:,} | {r['pairs']:,} | {r['sample_wall']:.2f} | {r['pairs_wall']:.2f} "
+            f"({r['pairs_cpu']:.2f}) | {sw['free']:,} | {sw['wall']:.2f} ({sw['cpu']:.2f}) | {pa['free']:,} | "
+            f"{pa['wall']:.2f} ({pa['cpu']:.2f}) | {r['pairs_wall'] + sw['wall']:.2f} "
+            f"({r['pairs_cpu'] + sw['cpu']:.2f}) | {wk['finger_nodes']:.0f}+{wk['palm_nodes']:.0f}, "
+            f"{wk['finger_points']:.1f}+{wk['palm_points']:.1f}, {wk['cache_tests'] + wk['memo_tests']:.1f} | "
+            f"{r['peak_mb']:.0f} | {npy['wall']:.1f} ({npy['wall'] / r['pairs_wall']:.0f}x){same} |",
+            flush=True,
+        )
+    print("\nKernel scaling (swept; collision per candidate in microseconds of CPU; subset = see docstring):\n")
+    print(
+        "| part | points | (a)-(c) pass | pairs s (CPU) | collided | swept s (CPU) | us CPU / candidate | "
+        "nodes / candidate | peak MB |"
+    )
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    sizes = (10_000, 30_000) if quick else (10_000, 30_000, 100_000)
+    for spec in parts:
+        got = []
+        for n in sizes:
+            r = rows.get((spec["name"], n)) or _run({**spec, "points": n}, kernels=True)
+            got.append(r)
+            sw = r["swept"]
+            sub = " (subset)" if r["collision_candidates"] < r["pairs"] else ""
+            print(
+                f"| {r['name']} | {r['points']:,} | {r['pairs']:,} | {r['pairs_wall']:.2f} ({r['pairs_cpu']:.2f}) | "
+                f"{r['collision_candidates']:,}{sub} | {sw['wall']:.2f} ({sw['cpu']:.2f}) | "
+                f"{1e6 * sw['cpu'] / max(r['collision_candidates'], 1):.2f} | "
+                f"{sw['work']['finger_nodes'] + sw['work']['palm_nodes']:.0f} | {r['peak_mb']:.0f} |",
+                flush=True,
+            )
+        x = [math.log(r["points"]) for r in got]
+        for key, f in (
+            ("pairs CPU", lambda r: r["pairs_cpu"]),
+            ("(a)-(c) pairs", lambda r: r["pairs"]),
+            ("collision CPU per candidate", lambda r: r["swept"]["cpu"] / max(r["collision_candidates"], 1)),
+            (
+                "collision CPU, all candidates",
+                lambda r: r["swept"]["cpu"] * r["pairs"] / max(r["collision_candidates"], 1),
+            ),
+        ):
+            y = [math.log(max(f(r), 1e-12)) for r in got]
+            slope = (y[-1] - y[0]) / (x[-1] - x[0])
+            print(f"\n{spec['name']}: {key} grows as points^{slope:.2f} ({sizes[0]:,} -> {sizes[-1]:,})")
+
+
+def _run(spec: dict, kernels: bool = False) -> dict:
     r = subprocess.run(
-        [sys.executable, __file__, "--child", json.dumps(spec)], capture_output=True, text=True, cwd=ROOT, timeout=3600
+        [sys.executable, __file__, "--kernel-child" if kernels else "--child", json.dumps(spec)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=3600,
     )
     if r.returncode != 0:
         raise RuntimeError(r.stderr[-2000:])
@@ -89,10 +284,19 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--scaling-only", action="store_true")
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--kernels-only", action="store_true")
     ap.add_argument("--child")
+    ap.add_argument("--kernel-child")
     args = ap.parse_args()
     if args.child:
         print(json.dumps(_child(json.loads(args.child))))
+        return
+    if args.kernel_child:
+        print(json.dumps(_kernel_child(json.loads(args.kernel_child))))
+        return
+    if args.kernels_only:
+        print(f"machine: {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}; gripper pgn-80, 16 rolls")
+        _kernel_tables(args.quick)
         return
     from graspgen.examples import EXAMPLES
 
@@ -154,6 +358,7 @@ def main() -> None:
             y = [math.log(max(r["timings"][key], 1e-6)) for r in rows]
             slope = (y[-1] - y[0]) / (x[-1] - x[0])
             print(f"\n{spec['name']}: {key} time grows as points^{slope:.2f} ({sizes[0]} -> {sizes[-1]})")
+    _kernel_tables(args.quick)
 
 
 if __name__ == "__main__":
