@@ -357,7 +357,8 @@ def main() -> None:
         for key in ("pairs", "collision"):
             y = [math.log(max(r["timings"][key], 1e-6)) for r in rows]
             slope = (y[-1] - y[0]) / (x[-1] - x[0])
-            print(f"\n{spec['name']}: {key} time grows as points^{slope:.2f} ({sizes[0]} -> {sizes[-1]})")
+            span = f"{rows[0]['points']} -> {rows[-1]['points']}"
+            print(f"\n{spec['name']}: {key} time grows as points^{slope:.2f} ({span})")
     _kernel_tables(args.quick)
 
 
