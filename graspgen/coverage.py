@@ -17,13 +17,13 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numba import njit, prange
 
 __all__ = ["LEVELS", "CoverageReport", "coverage", "coverage_shares", "axis_angles_deg", "combined_distance"]
 
 #: (radius in metres, axis angle in degrees) at which coverage is reported
 LEVELS: tuple[tuple[float, float], ...] = ((0.01, 30.0), (0.02, 45.0))
 #: candidates compared against all selected grasps at once, per block (memory: block x selected floats)
-_BLOCK = 65_536
 
 
 @dataclass(frozen=True)
@@ -97,16 +97,35 @@ def coverage_shares(
     if n == 0 or len(sel) == 0:
         return tuple(0.0 for _ in levels)
     Ps, Us = P[sel], U[sel]
-    cos_levels = [math.cos(math.radians(a)) for _, a in levels]
-    covered = np.zeros((len(levels), n), dtype=bool)
-    for lo in range(0, n, _BLOCK):
-        hi = min(lo + _BLOCK, n)
-        d2 = np.sum((P[lo:hi, None, :] - Ps[None, :, :]) ** 2, axis=2)
-        c = np.abs(U[lo:hi] @ Us.T)
-        for k, ((radius, _), cos_a) in enumerate(zip(levels, cos_levels, strict=True)):
-            # 1e-12 slack: a grasp exactly at the level's edge counts as covered
-            covered[k, lo:hi] = np.any((d2 <= radius * radius + 1e-12) & (c >= cos_a - 1e-12), axis=1)
+    # 1e-12 slack: a grasp exactly at the level's edge counts as covered
+    r2 = np.array([radius * radius + 1e-12 for radius, _ in levels])
+    cos_a = np.array([math.cos(math.radians(a)) - 1e-12 for _, a in levels])
+    covered = _covered(np.ascontiguousarray(P), np.ascontiguousarray(U), np.ascontiguousarray(Ps),
+                       np.ascontiguousarray(Us), r2, cos_a)
     return tuple(float(covered[k].mean()) for k in range(len(levels)))
+
+
+@njit(parallel=True, cache=True)
+def _covered(P, U, Ps, Us, r2, cos_a):
+    """(levels, n) bool: candidate i lies within level k of some selected grasp; stops at the first one found
+    (the same tests as a full candidates x selected comparison, without building it)."""
+    n, m, L = P.shape[0], Ps.shape[0], r2.shape[0]
+    out = np.zeros((L, n), dtype=np.bool_)
+    for i in prange(n):
+        todo = L
+        for s in range(m):
+            dx = P[i, 0] - Ps[s, 0]
+            dy = P[i, 1] - Ps[s, 1]
+            dz = P[i, 2] - Ps[s, 2]
+            d2 = dx * dx + dy * dy + dz * dz
+            c = abs(U[i, 0] * Us[s, 0] + U[i, 1] * Us[s, 1] + U[i, 2] * Us[s, 2])
+            for k in range(L):
+                if not out[k, i] and d2 <= r2[k] and c >= cos_a[k]:
+                    out[k, i] = True
+                    todo -= 1
+            if todo == 0:
+                break
+    return out
 
 
 def coverage(
