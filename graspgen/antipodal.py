@@ -108,17 +108,33 @@ def _count_run(X, Y, Z, NX, NY, NZ, i, start, stop, lims, inside_ok):
     return n_acc, n_bad, n_ab
 
 
+@njit(cache=True, inline="always")
+def _popcount(v):
+    v = v - ((v >> np.uint64(1)) & np.uint64(0x5555555555555555))
+    v = (v & np.uint64(0x3333333333333333)) + ((v >> np.uint64(2)) & np.uint64(0x3333333333333333))
+    v = (v + (v >> np.uint64(4))) & np.uint64(0x0F0F0F0F0F0F0F0F)
+    return (v * np.uint64(0x0101010101010101)) >> np.uint64(56)
+
+
 @njit(cache=True)
 def _fill_run(X, Y, Z, NX, NY, NZ, i, start, stop, lims, inside_ok, out_j, out_inside, pos, end):
-    # branch-free compaction: always store, advance only on acceptance; the row's count is known from the
-    # counting pass, so stopping at `end` keeps every store inside this row's slice
-    for j in range(start, stop):
+    # 64 pairs at a time: their verdicts packed into a word by a branch-free (vectorised) loop, then the few
+    # accepted ones (~3 %) stored in order. The row's count is known from the counting pass: stop at `end`
+    for b0 in range(start, stop, 64):
         if pos == end:
             break
-        acc, _, _, ins = _judge(X, Y, Z, NX, NY, NZ, i, j, lims, inside_ok)
-        out_j[pos] = j
-        out_inside[pos] = ins
-        pos += acc
+        acc_w = np.uint64(0)
+        ins_w = np.uint64(0)
+        for t in range(min(64, stop - b0)):
+            acc, _, _, ins = _judge(X, Y, Z, NX, NY, NZ, i, b0 + t, lims, inside_ok)
+            acc_w |= np.uint64(acc) << np.uint64(t)
+            ins_w |= np.uint64(ins) << np.uint64(t)
+        while acc_w:
+            low = acc_w & (~acc_w + np.uint64(1))
+            out_j[pos] = b0 + np.int64(_popcount(low - np.uint64(1)))
+            out_inside[pos] = (ins_w & low) != np.uint64(0)
+            pos += 1
+            acc_w ^= low
     return pos
 
 
