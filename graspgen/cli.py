@@ -15,22 +15,12 @@ from pathlib import Path
 from typing import Any
 
 from .errors import Cancelled, GraspgenError, InvalidUnitsError
+from .examples import EXAMPLE_GRIPPER
 
 __all__ = ["main", "DEMO_GRIPPER"]
 
 #: the gripper of the demo: the contract's example (a PGN-80-like parallel gripper)
-DEMO_GRIPPER: dict[str, Any] = {
-    "name": "pgn-80",
-    "stroke": 0.08,
-    "min_width": 0.0,
-    "finger_width": 0.02,
-    "finger_depth": 0.03,
-    "finger_thickness": 0.01,
-    "palm_depth": 0.02,
-    "palm_width": 0.02,
-    "friction": 0.5,
-    "pregrasp_clearance": 0.02,
-}
+DEMO_GRIPPER: dict[str, Any] = dict(EXAMPLE_GRIPPER)
 
 
 class _UsageError(Exception):

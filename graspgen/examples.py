@@ -15,7 +15,7 @@ import trimesh
 from .errors import InvalidParameterError
 from .parts import Part, load_part
 
-__all__ = ["EXAMPLES", "example_part", "ring_screw", "bar", "flanged_bushing", "thick_ring"]
+__all__ = ["EXAMPLES", "EXAMPLE_GRIPPER", "example_part", "ring_screw", "bar", "flanged_bushing", "thick_ring"]
 
 
 def ring_screw() -> trimesh.Trimesh:
@@ -75,6 +75,20 @@ def thick_ring() -> trimesh.Trimesh:
 
 
 #: name -> builder of a fresh mesh in metres
+#: the example gripper (metres), as in examples/pgn-80.json: the contract's PGN-80-like parallel gripper
+EXAMPLE_GRIPPER: dict[str, object] = {
+    "name": "pgn-80",
+    "stroke": 0.08,
+    "min_width": 0.0,
+    "finger_width": 0.02,
+    "finger_depth": 0.03,
+    "finger_thickness": 0.01,
+    "palm_depth": 0.02,
+    "palm_width": 0.02,
+    "friction": 0.5,
+    "pregrasp_clearance": 0.02,
+}
+
 EXAMPLES: dict[str, Callable[[], trimesh.Trimesh]] = {
     "ring-screw": ring_screw,
     "bar": bar,

@@ -8,20 +8,12 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-SLUG = r"^[a-z0-9][a-z0-9._-]{0,62}$"
+from graspgen.examples import EXAMPLE_GRIPPER
+from graspgen.gripper import SLUG_PATTERN
 
-_GRIPPER_EXAMPLE = {
-    "name": "pgn-80",
-    "stroke": 0.08,
-    "min_width": 0.0,
-    "finger_width": 0.02,
-    "finger_depth": 0.03,
-    "finger_thickness": 0.01,
-    "palm_depth": 0.02,
-    "palm_width": 0.02,
-    "friction": 0.5,
-    "pregrasp_clearance": 0.02,
-}
+SLUG = SLUG_PATTERN.pattern
+
+_GRIPPER_EXAMPLE = dict(EXAMPLE_GRIPPER)
 _PARAMS_EXAMPLE = {"points": 10000, "safety_factor": 1.5, "rolls": 16, "k1": 16, "k2": 4, "seed": 0}
 
 
