@@ -3,6 +3,8 @@
     .venv/bin/python bench/bench_core.py                  # everything (tens of minutes)
     .venv/bin/python bench/bench_core.py --quick          # example parts and tless_04 only, no 100k run
     .venv/bin/python bench/bench_core.py --kernels-only   # only the kernel tables (criteria (a)-(d)), see below
+    git show 03a6016:graspgen/collision.py > /tmp/collision_03a6016.py
+    .venv/bin/python bench/bench_core.py --kernels-only --baseline /tmp/collision_03a6016.py   # before/after
 
 Each measurement runs in its own process (peak memory = that process's ru_maxrss), warm: the process first runs the
 pipeline once on a small part so numba's compiled code is loaded. Prints Markdown tables.
@@ -189,6 +191,36 @@ def _kernel_child(spec: dict) -> dict:
             "free_rolls": int(fr.sum()),
             "work": {k: v / max(len(sel), 1) for k, v in work.items()},
         }
+        if spec.get("baseline"):  # another version of graspgen/collision.py, e.g. from git history: same inputs
+            import importlib.util
+
+            name = "graspgen._collision_baseline"
+            mod = sys.modules.get(name)
+            if mod is None:
+                mspec = importlib.util.spec_from_file_location(name, spec["baseline"])
+                mod = importlib.util.module_from_spec(mspec)
+                sys.modules[name] = mod
+                mspec.loader.exec_module(mod)
+            args = (
+                pts,
+                nrm,
+                0.5 * (pts[ci] + pts[cj]),
+                d / w[:, None],
+                w,
+                inside,
+                mod.collision_model(gripper, mode),
+                16,
+            )
+            mod.free_rolls(*args[:2], *(a[:2000] for a in args[2:6]), *args[6:])  # compile / load
+            t0 = clock()
+            base = mod.free_rolls(*args)
+            t1 = clock()
+            out[mode]["baseline"] = {
+                "wall": t1[0] - t0[0],
+                "cpu": t1[1] - t0[1],
+                "equal": bool(np.array_equal(base, fr)),
+            }
+            del base, args
         del fr, d, w
     if spec.get("numpy"):
         t0 = clock()
@@ -199,7 +231,7 @@ def _kernel_child(spec: dict) -> dict:
     return out
 
 
-def _kernel_tables(quick: bool) -> None:
+def _kernel_tables(quick: bool, baseline: str | None = None) -> None:
     parts = [RING_SPEC]
     if (SHARED / "tless_04.stl").is_file():
         parts.insert(0, {"kind": "file", "name": "tless_04", "path": str(SHARED / "tless_04.stl"), "units": "mm"})
@@ -217,7 +249,7 @@ def _kernel_tables(quick: bool) -> None:
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|")
     rows = {}
     for spec in parts:
-        r = _run({**spec, "points": 10_000, "numpy": True}, kernels=True)
+        r = _run({**spec, "points": 10_000, "numpy": True, "baseline": baseline}, kernels=True)
         rows[(spec["name"], 10_000)] = r
         sw, pa, wk, npy = r["swept"], r["paper"], r["swept"]["work"], r["numpy"]
         same = "" if npy["accepted"] == r["pairs"] and npy["outside"] == r["rej_outside"] else " MISMATCH"
@@ -231,6 +263,19 @@ def _kernel_tables(quick: bool) -> None:
             f"{r['peak_mb']:.0f} | {npy['wall']:.1f} ({npy['wall'] / r['pairs_wall']:.0f}x){same} |",
             flush=True,
         )
+    if baseline:
+        print(f"\nCollision kernel against {baseline} on the same candidates (s, CPU in brackets):\n")
+        print("| part | mode | baseline s (CPU) | this s (CPU) | CPU ratio | masks equal |")
+        print("|---|---|---:|---:|---:|---|")
+        for spec in parts:
+            r = rows[(spec["name"], 10_000)]
+            for mode in ("swept", "paper"):
+                m, b = r[mode], r[mode]["baseline"]
+                print(
+                    f"| {r['name']} | {mode} | {b['wall']:.2f} ({b['cpu']:.2f}) | {m['wall']:.2f} ({m['cpu']:.2f}) | "
+                    f"{b['cpu'] / max(m['cpu'], 1e-9):.1f}x | {b['equal']} |",
+                    flush=True,
+                )
     print("\nKernel scaling (swept; collision per candidate in microseconds of CPU; subset = see docstring):\n")
     print(
         "| part | points | (a)-(c) pass | pairs s (CPU) | collided | swept s (CPU) | us CPU / candidate | "
@@ -285,6 +330,7 @@ def main() -> None:
     ap.add_argument("--scaling-only", action="store_true")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--kernels-only", action="store_true")
+    ap.add_argument("--baseline", help="another graspgen/collision.py (e.g. from git show) to time on the same input")
     ap.add_argument("--child")
     ap.add_argument("--kernel-child")
     args = ap.parse_args()
@@ -296,7 +342,7 @@ def main() -> None:
         return
     if args.kernels_only:
         print(f"machine: {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}; gripper pgn-80, 16 rolls")
-        _kernel_tables(args.quick)
+        _kernel_tables(args.quick, args.baseline and str(Path(args.baseline).resolve()))
         return
     from graspgen.examples import EXAMPLES
 
@@ -359,7 +405,7 @@ def main() -> None:
             slope = (y[-1] - y[0]) / (x[-1] - x[0])
             span = f"{rows[0]['points']} -> {rows[-1]['points']}"
             print(f"\n{spec['name']}: {key} time grows as points^{slope:.2f} ({span})")
-    _kernel_tables(args.quick)
+    _kernel_tables(args.quick, args.baseline and str(Path(args.baseline).resolve()))
 
 
 if __name__ == "__main__":
