@@ -149,13 +149,16 @@ def _kernel_child(spec: dict) -> dict:
     t1 = clock()
     out = {"name": spec["name"], "points": len(pts), "sample_wall": t1[0] - t0[0], "sample_cpu": t1[1] - t0[1]}
     # warm: load the compiled kernels on a small slice
-    small = antipodal.antipodal_pairs(pts[:400], nrm[:400], **kw)
-    sm = 0.5 * (pts[small.i] + pts[small.j])
-    sd = pts[small.j] - pts[small.i]
+    # (points spread over the whole part, so that some pairs pass and the collision kernel really runs)
+    wp, wn = pts[:: max(1, len(pts) // 400)], nrm[:: max(1, len(pts) // 400)]
+    small = antipodal.antipodal_pairs(wp, wn, **kw)
+    assert len(small.i) > 0, "warm-up without pairs"
+    sm = 0.5 * (wp[small.i] + wp[small.j])
+    sd = wp[small.j] - wp[small.i]
     for mode in ("swept", "paper"):
         model = collision.collision_model(gripper, mode)
         w = np.linalg.norm(sd, axis=1)
-        collision.free_rolls_stats(pts, nrm, sm, sd / w[:, None], w, small.inside, model, 16)
+        collision.free_rolls_stats(wp, wn, sm, sd / w[:, None], w, small.inside, model, 16)
     t0 = clock()
     res = antipodal.antipodal_pairs(pts, nrm, **kw)
     t1 = clock()

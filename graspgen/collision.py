@@ -17,12 +17,15 @@ far beyond rounding error, and every shortcut (a node wholly inside or outside a
 that every roll of a finger covers, the half-turn symmetry of the finger boxes) keeps a guard band and falls
 back to the per-roll test inside it.
 
-Speed: the points live in a bounding-volume hierarchy (a balanced binary tree split along the principal axis,
-oriented boxes per node). A node is skipped when its box misses every region's slab along the axis, its
-radial band around the axis, or (for the palm, and for the fingers once few rolls are open) the region at
-every open roll; a node lying wholly inside a region at a roll blocks that roll at once. Points that blocked
-rolls recently are kept per thread and tried first, because neighbouring candidates share most of their
-blockers.
+Speed: the points live in a bounding-volume hierarchy (a balanced binary tree split along the principal axis;
+per node an oriented box, an axis-aligned box and a ball). A node is skipped when it misses every region's slab
+along the closing axis, its radial band around the axis, or (for the palm, and for the fingers once few rolls
+are open) the region at every open roll: the ball first, for all rolls at once, then both boxes projected onto
+the roll's axes and, for the palm, the node's own axes. A node wholly inside a region at a roll blocks that roll
+at once. Before any traversal, remembered blockers are tried: a memo shared by the threads keyed by the grid
+cell of each contact (fingers) and of the palm's centre at each open roll (palm), and a small per-thread cache;
+neighbouring candidates share most of their blockers, and most blocked candidates end there. The fingers' box is
+symmetric under a half turn, so rolls k and k + R/2 share their work (R even).
 """
 
 from __future__ import annotations
@@ -47,8 +50,8 @@ _FINGER_ANGULAR = 4  # per-roll node tests for the fingers once at most this man
 _GUARD = 1e-9  # relative guard band of the point-level shortcuts
 _NODE = 24  # floats per tree node: see _build_tree
 _STATS = 8  # counters per chunk: see free_rolls_stats
-_MEMO_SLOTS = 2  # finger blockers remembered per contact cell
-_MEMO_CELLS = 1 << 20
+_MEMO_SLOTS = 2  # blockers remembered per memo cell
+_MEMO_CELLS = 1 << 20  # at most this many memo cells (each about four leaf patches wide)
 
 
 @dataclass(frozen=True)
