@@ -30,6 +30,8 @@ symmetric under a half turn, so rolls k and k + R/2 share their work (R even).
 
 from __future__ import annotations
 
+import hashlib
+import threading
 from dataclasses import dataclass
 
 import numba
@@ -45,7 +47,7 @@ __all__ = ["MAX_ROLLS", "CollisionModel", "collision_model", "free_rolls"]
 MAX_ROLLS = 64
 _LEAF = 8  # most points per leaf
 _CACHE = 8  # recent blockers kept per thread and phase
-_CHUNK = 64  # candidates per parallel task
+_CHUNK = 4096  # candidates per parallel task (the per-thread cache of blockers lives as long as a task)
 _FINGER_ANGULAR = 4  # per-roll node tests for the fingers once at most this many (symmetric pairs of) rolls are open
 _GUARD = 1e-9  # relative guard band of the point-level shortcuts
 _NODE = 24  # floats per tree node: see _build_tree
@@ -719,8 +721,30 @@ def _free_rolls_kernel(
             out[q] = ~blocked & full
 
 
-def _prepare(points, normals, model, rolls):
-    """Tree, region constants and roll tables shared by free_rolls and the counting variant."""
+#: the last few prepared point sets: the pipeline calls free_rolls in batches on the same points (the memo of
+#: blockers stays warm across the batches; it only ever holds hints)
+_PREPARED: dict = {}
+_PREPARED_KEEP = 2
+_PREPARED_LOCK = threading.Lock()
+
+
+def _prepared(points, model, rolls):
+    """_prepare, reused while the same points (by content), model and roll count come back."""
+    P = np.ascontiguousarray(points, dtype=np.float64)
+    key = (hashlib.blake2b(P.tobytes(), digest_size=16).digest(), P.shape, model, rolls)
+    with _PREPARED_LOCK:
+        got = _PREPARED.get(key)
+    if got is None:
+        got = _prepare(P, model, rolls)
+        with _PREPARED_LOCK:
+            while len(_PREPARED) >= _PREPARED_KEEP:
+                _PREPARED.pop(next(iter(_PREPARED)))
+            _PREPARED[key] = got
+    return got
+
+
+def _prepare(points, model, rolls):
+    """Tree, region constants, roll tables and the blocker memo for one point set."""
     from .transforms import roll_angles_rad
 
     P = np.ascontiguousarray(points, dtype=np.float64)
@@ -766,9 +790,7 @@ def _run(points, normals, midpoints, axes, widths, inside, model, rolls):
     stats = np.zeros(((m + _CHUNK - 1) // _CHUNK, _STATS), dtype=np.int64)
     if m == 0 or len(points) == 0:
         return np.ones((m, rolls), dtype=bool), stats
-    soa, nodes, leaves, reg, model_f, cos_k, sin_k, half, gfac, full, memo, grid = _prepare(
-        points, normals, model, rolls
-    )
+    soa, nodes, leaves, reg, model_f, cos_k, sin_k, half, gfac, full, memo, grid = _prepared(points, model, rolls)
     out = np.zeros(m, dtype=np.uint64)
     with numba.parallel_chunksize(1):
         _free_rolls_kernel(

@@ -267,3 +267,28 @@ def test_free_rolls_equal_reference_on_larger_samples(name, mode):
     expect = ref.free_rolls(pts, mids[sel], axes[sel], w[sel], inside[sel], GRIPPER, mode, 16)
     assert np.array_equal(fr[sel], expect)
     assert ((expect.sum(1) > 0) & (expect.sum(1) < 16)).any() and expect.any() and not expect.all()
+
+
+def test_free_rolls_in_batches_equal_one_call():
+    """The pipeline calls free_rolls in batches on the same points: the prepared tree and the blocker memo are
+    reused between calls (hints only), and the result is the same as one call, and as a fresh process would give."""
+    pts, nrm = _sample(_parts()["u"], 1500)
+    mids, axes, w, inside = _candidates(pts, nrm)
+    model = collision_model(GRIPPER, "swept")
+    whole = free_rolls(pts, nrm, mids, axes, w, inside, model, 16)
+    bounds = np.linspace(0, len(mids), 7).astype(int)
+    parts = [
+        free_rolls(pts, nrm, mids[a:b], axes[a:b], w[a:b], inside[a:b], model, 16)
+        for a, b in zip(bounds[:-1], bounds[1:], strict=True)
+    ]
+    assert np.array_equal(np.concatenate(parts), whole)
+    # reversed order of the batches (a different memo history) and a copy of the points (same content)
+    back = [
+        free_rolls(pts.copy(), nrm, mids[a:b], axes[a:b], w[a:b], inside[a:b], model, 16)
+        for a, b in zip(bounds[-2::-1], bounds[:0:-1], strict=True)
+    ]
+    assert np.array_equal(np.concatenate(back[::-1]), whole)
+    sel = np.arange(0, len(mids), max(1, len(mids) // 200))
+    assert np.array_equal(
+        whole[sel], ref.free_rolls(pts, mids[sel], axes[sel], w[sel], inside[sel], GRIPPER, "swept", 16)
+    )
