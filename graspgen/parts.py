@@ -199,6 +199,12 @@ def _read_mesh(data: bytes, ft: str, label: str) -> tuple[np.ndarray, np.ndarray
         loaded = trimesh.load(io.BytesIO(data), file_type=ft, process=False)
     except ImportError:
         raise  # a broken installation is our problem, not the user's
+    except IndexError as exc:  # trimesh's OBJ/OFF readers index the vertices with the faces as given
+        if _sniff(data) in (None, ft):
+            raise InvalidMeshError(
+                f"{label} has faces that refer to missing vertices: re-export it", field="file"
+            ) from exc
+        raise InvalidMeshError(_unreadable(data, ft, label, f"{type(exc).__name__}: {exc}"), field="file") from exc
     except Exception as exc:  # trimesh's parsers raise anything from ValueError to struct.error
         raise InvalidMeshError(_unreadable(data, ft, label, f"{type(exc).__name__}: {exc}"), field="file") from exc
     if isinstance(loaded, trimesh.Scene):
@@ -282,6 +288,8 @@ def _read_npz(data: bytes, label: str) -> tuple[np.ndarray, np.ndarray | None]:
 def _unreadable(data: bytes, ft: str, label: str, detail: str | None = None) -> str:
     """Why no triangles came out of `data`, as specifically as the bytes allow."""
     sniffed = _sniff(data)
+    if sniffed in _NOT_MESHES:
+        return f"{label} is {_NOT_MESHES[sniffed]}, not a 3D model: export the part itself as " + ", ".join(MESH_TYPES)
     if sniffed == "stl-binary":
         (declared,) = struct.unpack_from("<I", data, 80)
         expected = 84 + 50 * declared
@@ -301,8 +309,22 @@ def _unreadable(data: bytes, ft: str, label: str, detail: str | None = None) -> 
     return f"{msg} ({detail})" if detail else msg
 
 
+#: files people upload instead of the model (a screenshot, a drawing): recognised by their magic bytes
+_OTHER_MAGIC = (
+    (b"\x89PNG\r\n\x1a\n", "png"),
+    (b"\xff\xd8\xff", "jpeg"),
+    (b"GIF87a", "gif"),
+    (b"GIF89a", "gif"),
+    (b"%PDF-", "pdf"),
+)
+_NOT_MESHES = {"png": "a PNG image", "jpeg": "a JPEG image", "gif": "a GIF image", "pdf": "a PDF document"}
+
+
 def _sniff(data: bytes) -> str | None:
     """The format the bytes look like ('stl-binary' for binary STL), or None."""
+    for magic, kind in _OTHER_MAGIC:
+        if data.startswith(magic):
+            return kind
     head = data[:512].lstrip()
     for magic, kind in ((b"glTF", "glb"), (b"ply", "ply"), (b"PK", "npz"), (b"OFF", "off"), (b"COFF", "off")):
         if head.startswith(magic):
