@@ -6,6 +6,7 @@ Exit status: 0 success, 2 bad input (one-line reason on stderr, no output writte
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 import time
@@ -246,11 +247,14 @@ def _run_and_write(run, outputs: dict[str, Path | None], *, quiet: bool, preview
     """Run, then move every output into place only when all of them were written: nothing half-done."""
     tag = uuid.uuid4().hex[:8]
     temps: dict[str, Path] = {}
+    made: list[Path] = []  # directories this run created: removed again when it fails
     for key, path in outputs.items():
         if path is not None:
+            made += [d for d in (path.parent, *path.parent.parents) if not d.exists() and d not in made]
             path.parent.mkdir(parents=True, exist_ok=True)
             temps[key] = path.with_name(f".{path.name}.{tag}.tmp")
     bar = _ProgressBar(enabled=sys.stderr.isatty() and not quiet)
+    done = False
     try:
         result = run(temps.get("recording"), bar)
         bar.close()
@@ -261,10 +265,15 @@ def _run_and_write(run, outputs: dict[str, Path | None], *, quiet: bool, preview
             temps["preview"].write_bytes(preview(result))
         for key, tmp in temps.items():
             os.replace(tmp, outputs[key])
+        done = True
     finally:
         bar.close()
         for tmp in temps.values():
             tmp.unlink(missing_ok=True)
+        if not done:  # bad input writes nothing, not even the output's directory
+            for d in sorted(made, key=lambda p: len(p.parts), reverse=True):
+                with contextlib.suppress(OSError):
+                    d.rmdir()
     for warning in result.stats.get("warnings", []):
         print(f"graspgen: warning: {warning}", file=sys.stderr)
     if not quiet:
