@@ -117,7 +117,9 @@ def upload_object(
         session.rollback()  # hold no transaction (a SQLite write lock) while the mesh is checked
         if existing is not None:
             return version_out(name, existing), False
-        part = load_part(str(path), units=units, name=name, file_type=fmt)  # InvalidMeshError -> 422
+        # bytes, not the path: the loader names its input in messages, and the client must not see the server's
+        # temp path (load_part reads the whole file either way)
+        part = load_part(path.read_bytes(), units=units, name=name, file_type=fmt)  # InvalidMeshError -> 422
         blob = storage.put_file(path)
     for _ in range(3):
         try:
