@@ -641,6 +641,7 @@ def _free_rolls_kernel(
             xr[r, 0] = -reg[r, _PX]
             xr[r, 1] = reg[r, _PX]
         st = stats[c]
+        tmemo = memo[numba.get_thread_id()]
         for q in range(c * _CHUNK, min((c + 1) * _CHUNK, m)):
             ax, ay, az = axes[q, 0], axes[q, 1], axes[q, 2]
             yx, yy, yz, zx, zy, zz = _basis(ax, ay, az, switch)
@@ -678,7 +679,7 @@ def _free_rolls_kernel(
                     stack,
                     caches[0],
                     cache_pos[0],
-                    memo,
+                    tmemo,
                     grid,
                     cell0,
                     cell1,
@@ -709,7 +710,7 @@ def _free_rolls_kernel(
                     stack,
                     caches[1],
                     cache_pos[1],
-                    memo,
+                    tmemo,
                     grid,
                     -1,
                     -1,
@@ -718,7 +719,9 @@ def _free_rolls_kernel(
                     st,
                 )
                 blocked |= more
-            out[q] = ~blocked & full
+            free = ~blocked & full
+            for k in range(out.shape[1]):
+                out[q, k] = (free >> np.uint64(k)) & np.uint64(1) != np.uint64(0)
 
 
 #: the last few prepared point sets: the pipeline calls free_rolls in batches on the same points (the memo of
@@ -777,7 +780,8 @@ def _prepare(points, model, rolls):
         h *= 1.25
         dims = np.floor(ext / h).astype(np.int64) + 1
     grid = np.array([lo[0], lo[1], lo[2], 1.0 / h, dims[0], dims[1], dims[2]], dtype=np.float64)
-    memo = np.full((2, int(np.prod(dims)), _MEMO_SLOTS), -1, dtype=np.int64)
+    # one memo per thread: shared cells that both threads keep rewriting cost more than the hits they share
+    memo = np.full((numba.config.NUMBA_NUM_THREADS, 2, int(np.prod(dims)), _MEMO_SLOTS), -1, dtype=np.int64)
     return soa, nodes, leaves, _regions(model), model_f, cos_k, sin_k, half, gfac, full, memo, grid
 
 
@@ -791,7 +795,7 @@ def _run(points, normals, midpoints, axes, widths, inside, model, rolls):
     if m == 0 or len(points) == 0:
         return np.ones((m, rolls), dtype=bool), stats
     soa, nodes, leaves, reg, model_f, cos_k, sin_k, half, gfac, full, memo, grid = _prepared(points, model, rolls)
-    out = np.zeros(m, dtype=np.uint64)
+    out = np.empty((m, rolls), dtype=np.bool_)
     with numba.parallel_chunksize(1):
         _free_rolls_kernel(
             np.ascontiguousarray(midpoints, dtype=np.float64),
@@ -814,8 +818,7 @@ def _run(points, normals, midpoints, axes, widths, inside, model, rolls):
             out,
             stats,
         )
-    bits = (out[:, None] >> np.arange(rolls, dtype=np.uint64)[None, :]) & np.uint64(1)
-    return bits.astype(bool), stats
+    return out, stats
 
 
 def free_rolls(
