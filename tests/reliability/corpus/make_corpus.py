@@ -1,0 +1,270 @@
+"""Writes the bad-input corpus (tests/reliability/corpus) and its index.json; run it again after changing CASES.
+
+    .venv/bin/python tests/reliability/corpus/make_corpus.py
+
+Every entry is one test of the CLI (`graspgen generate`, tests/reliability/test_bad_input_cli.py) and one of the
+API (POST /v1/objects, /v1/grippers, /v1/jobs; tests/reliability/test_bad_input_api.py): both iterate index.json,
+so the two interfaces are held to the same list. An entry says what must happen:
+
+- `expect`: "reject" (CLI exit 2 with one line on stderr, API 4xx problem+json, nothing stored) or "warn"
+  (accepted, with a warning that contains every `says` string),
+- `code`: the API problem `code`,
+- `says`: substrings (case-insensitive) that the CLI's line and the API's `detail` must both contain: the reason
+  has to name the problem, not only fail,
+- `units`: the unit the mesh is declared in (`null`: not given at all),
+- `api_code` / `api_says`: where the API's words differ from the CLI's (the API validates the body's JSON type
+  before graspgen sees it).
+
+The files are small and deterministic (fixed vertices, no randomness), so regenerating gives the same bytes.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import struct
+from pathlib import Path
+from typing import Any
+
+HERE = Path(__file__).resolve().parent
+
+#: a valid gripper (CONTRACT.md example); the gripper cases change one thing each
+GRIPPER: dict[str, Any] = {
+    "name": "pgn-80",
+    "stroke": 0.08,
+    "min_width": 0.0,
+    "finger_width": 0.02,
+    "finger_depth": 0.03,
+    "finger_thickness": 0.01,
+    "palm_depth": 0.02,
+    "friction": 0.5,
+    "pregrasp_clearance": 0.02,
+}
+
+
+# -- mesh bytes -------------------------------------------------------------------------------------------------------
+def _box(ex: float, ey: float, ez: float) -> tuple[list[tuple[float, float, float]], list[tuple[int, int, int]]]:
+    """A closed axis-aligned box centred on the origin, outward winding (1-based faces are made by the writers)."""
+    hx, hy, hz = ex / 2, ey / 2, ez / 2
+    v = [(sx * hx, sy * hy, sz * hz) for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]
+    f = [
+        (0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5),  # -x, +x
+        (0, 4, 5), (0, 5, 1), (2, 3, 7), (2, 7, 6),  # -y, +y
+        (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3),  # -z, +z
+    ]  # fmt: skip
+    return v, f
+
+
+def binary_stl(vertices, faces) -> bytes:  # type: ignore[no-untyped-def]
+    out = io.BytesIO()
+    out.write(b"graspgen reliability corpus".ljust(80, b" "))
+    out.write(struct.pack("<I", len(faces)))
+    for a, b, c in faces:
+        out.write(struct.pack("<3f", 0.0, 0.0, 0.0))
+        for i in (a, b, c):
+            out.write(struct.pack("<3f", *vertices[i]))
+        out.write(b"\0\0")
+    return out.getvalue()
+
+
+def obj_text(vertices, faces) -> bytes:  # type: ignore[no-untyped-def]
+    lines = ["# graspgen reliability corpus"]
+    lines += [f"v {x!r} {y!r} {z!r}" for x, y, z in vertices]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def ascii_stl(vertices, faces) -> bytes:  # type: ignore[no-untyped-def]
+    lines = ["solid corpus"]
+    for a, b, c in faces:
+        lines += ["  facet normal 0 0 0", "    outer loop"]
+        lines += [f"      vertex {vertices[i][0]} {vertices[i][1]} {vertices[i][2]}" for i in (a, b, c)]
+        lines += ["    endloop", "  endfacet"]
+    lines.append("endsolid corpus")
+    return ("\n".join(lines) + "\n").encode()
+
+
+def png_bytes() -> bytes:
+    """A valid 8 x 8 grey PNG (what a user sends when they pick the preview instead of the model)."""
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.new("L", (8, 8), 128).save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def _mesh_files() -> dict[str, bytes]:
+    box_v, box_f = _box(40.0, 30.0, 20.0)  # millimetres
+    good = binary_stl(box_v, box_f)
+    nan_v = list(box_v)
+    nan_v[3] = (float("nan"), nan_v[3][1], nan_v[3][2])
+    inf_v = list(box_v)
+    inf_v[5] = (inf_v[5][0], float("inf"), inf_v[5][2])
+    tetra_v = [(0.0, 0.0, 0.0), (30.0, 0.0, 0.0), (0.0, 30.0, 0.0), (0.0, 0.0, 30.0)]
+    return {
+        "good_box_mm.stl": good,
+        "empty.stl": b"",
+        "truncated_box.stl": good[: 84 + 50 * 5 + 17],  # header says 12 triangles, the file stops in the 6th
+        "header_only.stl": good[:84],  # 80-byte header and a count of 12, no triangles at all
+        "png_image_named.stl": png_bytes(),
+        "obj_text_named.stl": obj_text(box_v, box_f),
+        "binary_stl_named.obj": good,
+        "garbage_text.stl": b"this is not a mesh, it is a note somebody saved with the wrong name\n" * 4,
+        "nan_vertex.obj": obj_text(nan_v, box_f).replace(b"v nan", b"v NaN"),
+        "nan_vertex_binary.stl": binary_stl(nan_v, box_f),
+        "inf_vertex_ascii.stl": ascii_stl(inf_v, box_f),
+        "vertices_only.obj": obj_text(box_v, []),
+        "collapsed_faces.obj": obj_text(box_v, [(0, 0, 1), (2, 3, 3), (4, 5, 4)]),
+        "flat_square.obj": obj_text(
+            [(0.0, 0.0, 0.0), (40.0, 0.0, 0.0), (40.0, 40.0, 0.0), (0.0, 40.0, 0.0)], [(0, 1, 2), (0, 2, 3)]
+        ),
+        "missing_vertex_index.obj": b"v 0 0 0\nv 30 0 0\nv 0 30 0\nv 0 0 30\nf 1 2 3\nf 1 2 9\nf 1 3 4\nf 2 3 4\n",
+        "open_tetrahedron.obj": obj_text(tetra_v, [(0, 2, 1), (0, 1, 3), (0, 3, 2)]),  # one face missing
+        "box_5m_drawn_in_mm.stl": binary_stl(*_box(5000.0, 3000.0, 2000.0)),
+        "box_50um.stl": binary_stl(*_box(5.0e-5, 4.0e-5, 3.0e-5)),
+        "unknown_extension.xyz": good,
+    }
+
+
+def _mesh(id_: str, file: str, units: str | None, code: str, *says: str, expect: str = "reject", field=None):  # type: ignore[no-untyped-def]
+    e = {"id": id_, "kind": "mesh", "file": f"meshes/{file}", "units": units, "expect": expect, "code": code}
+    e["says"] = list(says)
+    if field:
+        e["field"] = field
+    return e
+
+
+MESH_CASES = [
+    _mesh("mesh-empty", "empty.stl", "mm", "invalid-mesh", "empty", field="file"),
+    _mesh("mesh-truncated-binary-stl", "truncated_box.stl", "mm", "invalid-mesh", "truncated", "12 triangles"),
+    _mesh("mesh-stl-header-only", "header_only.stl", "mm", "invalid-mesh", "truncated"),
+    _mesh("mesh-png-named-stl", "png_image_named.stl", "mm", "invalid-mesh", "png"),
+    _mesh("mesh-obj-text-named-stl", "obj_text_named.stl", "mm", "invalid-mesh", "obj", "rename"),
+    _mesh("mesh-binary-stl-named-obj", "binary_stl_named.obj", "mm", "invalid-mesh", "binary stl", "rename"),
+    _mesh("mesh-garbage-text", "garbage_text.stl", "mm", "invalid-mesh", "no triangles"),
+    _mesh("mesh-nan-vertex-obj", "nan_vertex.obj", "mm", "invalid-mesh", "nan"),
+    _mesh("mesh-nan-vertex-binary-stl", "nan_vertex_binary.stl", "mm", "invalid-mesh", "nan"),
+    _mesh("mesh-inf-vertex-ascii-stl", "inf_vertex_ascii.stl", "mm", "invalid-mesh", "infinite"),
+    _mesh("mesh-no-faces", "vertices_only.obj", "mm", "invalid-mesh", "no triangles"),
+    _mesh("mesh-all-faces-collapsed", "collapsed_faces.obj", "mm", "invalid-mesh", "non-zero area"),
+    _mesh("mesh-flat", "flat_square.obj", "mm", "invalid-mesh", "flat"),
+    _mesh("mesh-face-index-out-of-range", "missing_vertex_index.obj", "mm", "invalid-mesh", "missing vertices"),
+    _mesh("mesh-unknown-extension", "unknown_extension.xyz", "mm", "invalid-mesh", "unsupported file type"),
+    _mesh(
+        "mesh-5m-part-declared-m-is-5km",
+        "box_5m_drawn_in_mm.stl",
+        "m",
+        "invalid-mesh",
+        "implausible",
+        "plausible in mm",
+        field="units",
+    ),
+    _mesh("mesh-50um-part-declared-m", "box_50um.stl", "m", "invalid-mesh", "implausible", field="units"),
+    _mesh("mesh-units-missing", "good_box_mm.stl", None, "validation-error", "units"),
+    _mesh("mesh-units-unknown", "good_box_mm.stl", "furlong", "invalid-units", "furlong"),
+    _mesh("mesh-open-surface", "open_tetrahedron.obj", "mm", "", "not watertight", expect="warn"),
+]
+
+
+# -- gripper specs ----------------------------------------------------------------------------------------------------
+def _grip(id_: str, change: dict[str, Any] | None, *says: str, drop: tuple[str, ...] = (), raw: str | None = None):  # type: ignore[no-untyped-def]
+    spec = {k: v for k, v in {**GRIPPER, **(change or {})}.items() if k not in drop}
+    text = raw if raw is not None else json.dumps(spec, indent=2, allow_nan=True) + "\n"
+    code = "validation-error" if raw is not None and raw.startswith("{not") else "invalid-gripper"
+    return {
+        "id": id_,
+        "kind": "gripper",
+        "file": f"grippers/{id_.removeprefix('gripper-')}.json",
+        "text": text,
+        "expect": "reject",
+        "code": code,
+        "says": list(says),
+    }
+
+
+GRIPPER_CASES = [
+    _grip("gripper-negative-stroke", {"stroke": -0.08}, "stroke", "> 0"),
+    _grip("gripper-negative-finger-width", {"finger_width": -0.02}, "finger_width"),
+    _grip("gripper-zero-finger-depth", {"finger_depth": 0.0}, "finger_depth"),
+    _grip("gripper-negative-palm-depth", {"palm_depth": -0.01}, "palm_depth"),
+    _grip("gripper-negative-clearance", {"pregrasp_clearance": -0.001}, "pregrasp_clearance"),
+    _grip("gripper-stroke-below-min-width", {"stroke": 0.02, "min_width": 0.03}, "min_width"),
+    _grip("gripper-stroke-equals-min-width", {"stroke": 0.03, "min_width": 0.03}, "min_width"),
+    _grip("gripper-friction-zero", {"friction": 0.0}, "friction"),
+    _grip("gripper-friction-nan", {"friction": float("nan")}, "friction", "finite"),
+    _grip("gripper-missing-stroke", None, "lacks", "stroke", drop=("stroke",)),
+    _grip("gripper-missing-name", None, "lacks", "name", drop=("name",)),
+    _grip("gripper-unknown-field", {"colour": "blue"}, "unknown", "colour"),
+    _grip("gripper-stroke-is-string", {"stroke": "0.08"}, "stroke", "number"),
+    _grip("gripper-stroke-is-bool", {"stroke": True}, "stroke", "number"),
+    _grip("gripper-name-not-slug", {"name": "PGN 80/../x"}, "slug"),
+    _grip("gripper-name-is-number", {"name": 80}, "slug"),
+    _grip("gripper-stroke-in-mm", {"stroke": 80.0}, "stroke", "metres"),
+    _grip("gripper-finger-depth-1km", {"finger_depth": 1000.0}, "finger_depth", "metres"),
+    # the API's body is declared as an object, so FastAPI's validation answers before GripperSpec does
+    {
+        **_grip("gripper-not-an-object", None, "json object", raw="[0.08, 0.02, 0.03]\n"),
+        "api_code": "validation-error",
+        "api_says": ["dictionary"],
+    },
+    _grip("gripper-not-json", None, "json", raw="{not json, 'stroke': 0.08\n"),
+]
+
+
+# -- run parameters ---------------------------------------------------------------------------------------------------
+def _params(id_: str, params: dict[str, Any], *says: str):  # type: ignore[no-untyped-def]
+    return {
+        "id": id_,
+        "kind": "params",
+        "file": f"params/{id_.removeprefix('params-')}.json",
+        "params": params,
+        "expect": "reject",
+        "code": "invalid-parameter",
+        "says": list(says),
+    }
+
+
+PARAMS_CASES = [
+    _params("params-points-99", {"points": 99}, "points"),
+    _params("params-points-0", {"points": 0}, "points"),
+    _params("params-points-not-int", {"points": 1.5}, "points"),
+    _params("params-rolls-0", {"rolls": 0}, "rolls"),
+    _params("params-rolls-65", {"rolls": 65}, "rolls"),
+    _params("params-k1-0", {"k1": 0}, "k1"),
+    _params("params-k2-0", {"k2": 0}, "k2"),
+    _params("params-safety-factor-below-1", {"safety_factor": 0.9}, "safety"),
+    _params("params-friction-0", {"friction": 0.0}, "friction"),
+    _params("params-friction-negative", {"friction": -0.3}, "friction"),
+    _params("params-seed-negative", {"seed": -1}, "seed"),
+    _params("params-collision-unknown", {"collision": "magic"}, "collision"),
+    _params("params-unknown-key", {"colour": 3}, "colour"),
+]
+
+CASES = MESH_CASES + GRIPPER_CASES + PARAMS_CASES
+
+
+def main() -> None:
+    for name, data in _mesh_files().items():
+        path = HERE / "meshes" / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(data)
+    (HERE / "grippers").mkdir(exist_ok=True)
+    (HERE / "grippers" / "good.json").write_text(json.dumps(GRIPPER, indent=2) + "\n")
+    index = []
+    for case in CASES:
+        case = dict(case)
+        if case["kind"] == "gripper":
+            (HERE / case["file"]).write_text(case.pop("text"))
+        elif case["kind"] == "params":
+            path = HERE / case["file"]
+            path.parent.mkdir(exist_ok=True)
+            path.write_text(json.dumps(case.pop("params"), indent=2) + "\n")
+        index.append(case)
+    ids = [c["id"] for c in index]
+    assert len(ids) == len(set(ids)), "corpus ids must be unique"
+    (HERE / "index.json").write_text(json.dumps(index, indent=1) + "\n")
+    print(f"wrote {len(index)} cases to {HERE}")
+
+
+if __name__ == "__main__":
+    main()
