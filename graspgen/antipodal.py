@@ -20,6 +20,8 @@ from numba import njit, prange
 
 __all__ = [
     "PairResult",
+    "PairPlan",
+    "pair_plan",
     "cone_half_angle_rad",
     "antipodal_pairs",
     "friction_margin_deg",
@@ -158,14 +160,15 @@ def _pairs_kernel(
     out_j,
     out_inside,
     counters,
+    r0,
+    r1,
 ):
-    n = X.shape[0]
-    # row i has n - 1 - i partners: pairing row k with row n - 1 - k balances the threads' work
-    for k in prange((n + 1) // 2):
+    # rows r0 <= i < r1; row i has n - 1 - i partners: pairing row r0 + k with row r1 - 1 - k balances the threads
+    for k in prange((r1 - r0 + 1) // 2):
         for side in range(2):
             kk = np.int64(k)  # prange indices are unsigned: keep the row index signed
-            i = kk if side == 0 else n - 1 - kk
-            if side == 1 and i == kk:
+            i = r0 + kk if side == 0 else r1 - 1 - kk
+            if side == 1 and i == r0 + kk:
                 break
             _pairs_row(
                 X,
@@ -187,6 +190,7 @@ def _pairs_kernel(
                 out_inside,
                 counters,
                 i,
+                offsets[r0] if fill else 0,
             )
 
 
@@ -211,6 +215,7 @@ def _pairs_row(
     out_inside,
     counters,
     i,
+    base,
 ):
     xi, yi, zi = X[i], Y[i], Z[i]
     ci = min(max(int((xi - origin[0]) / cell), 0), dims[0] - 1)
@@ -219,14 +224,14 @@ def _pairs_row(
     n_bad_orient = 0
     n_pass_ab = 0
     n_acc = 0
-    pos = offsets[i] if fill else 0
-    end = offsets[i + 1] if fill else 0
+    pos = offsets[i] - base if fill else 0
+    end = offsets[i + 1] - base if fill else 0
     for a in range(max(ci - reach, 0), min(ci + reach + 1, dims[0])):
         for b in range(max(cj - reach, 0), min(cj + reach + 1, dims[1])):
-            base = (a * dims[1] + b) * dims[2]
+            col = (a * dims[1] + b) * dims[2]
             # the cells of one (a, b) column are contiguous: one run of points
-            start = max(cell_start[base + max(ck - reach, 0)], i + 1)
-            stop = cell_start[base + min(ck + reach + 1, dims[2])]
+            start = max(cell_start[col + max(ck - reach, 0)], i + 1)
+            stop = cell_start[col + min(ck + reach + 1, dims[2])]
             if fill:
                 pos = _fill_run(X, Y, Z, NX, NY, NZ, i, start, stop, lims, inside_ok, out_j, out_inside, pos, end)
             else:
@@ -239,6 +244,114 @@ def _pairs_row(
     counters[i, 0] = n_acc
     counters[i, 1] = n_bad_orient
     counters[i, 2] = n_pass_ab
+
+
+class PairPlan:
+    """The counting pass of (a)-(c) over all pairs: exact per-criterion counts and how many pairs each row keeps.
+
+    `fill(r0, r1)` then produces the accepted pairs of rows r0 <= i < r1 (rows = points in the grid order the
+    kernel uses), so a caller can stream the pairs through the collision stage in blocks of bounded size
+    (`blocks(max_pairs)`) instead of holding all of them at once. Build it with `pair_plan()`.
+    """
+
+    def __init__(self, points, normals, *, stroke, min_width, friction, safety_factor, inside, finger_thickness):
+        p = np.ascontiguousarray(points, dtype=np.float64)
+        nrm = np.ascontiguousarray(normals, dtype=np.float64)
+        n = len(p)
+        self.n = n
+        self.pairs_total = n * (n - 1) // 2
+        out_lo, out_hi = float(min_width), float(stroke)
+        in_lo, in_hi = float(min_width + 2 * finger_thickness), float(stroke + 2 * finger_thickness)
+        lo = out_lo if not inside else min(out_lo, in_lo)
+        hi = out_hi if not inside else max(out_hi, in_hi)
+        self.offsets = np.zeros(n + 1, dtype=np.int64)
+        if n < 2:
+            self.order = np.arange(n)
+            self.identity = True
+            self.rejected_outside = self.rejected_friction = 0
+            self.rejected_stroke = self.pairs_total
+            return
+        cos_lim = math.cos(cone_half_angle_rad(friction, safety_factor))
+        # cells of half the reach keep the visited volume near the sphere of radius `hi`
+        cell = max(pair_cell_size(stroke, inside, finger_thickness), 1e-6)
+        order, cell_start, dims, origin = _grid(p, cell)
+        self.order = order
+        self.identity = bool(np.array_equal(order, np.arange(n)))
+        ps, ns = p[order], nrm[order]
+        soa = tuple(np.ascontiguousarray(a[:, k]) for a in (ps, ns) for k in range(3))
+        lims = np.array([lo * lo, hi * hi, out_lo**2, out_hi**2, in_lo**2, in_hi**2, cos_lim**2])
+        self._args = (*soa, cell_start, dims, origin, cell, 2, lims, bool(inside))
+        counters = np.zeros((n, 3), dtype=np.int64)
+        _pairs_kernel(*self._args, False, self.offsets, np.zeros(0, np.int64), np.zeros(0, np.bool_), counters, 0, n)
+        np.cumsum(counters[:, 0], out=self.offsets[1:])
+        m = int(self.offsets[-1])
+        self.rejected_outside = int(counters[:, 1].sum())
+        self.rejected_friction = int(counters[:, 2].sum()) - m
+        self.rejected_stroke = self.pairs_total - m - self.rejected_outside - self.rejected_friction
+
+    @property
+    def accepted(self) -> int:
+        """Pairs passing (a)-(c)."""
+        return int(self.offsets[-1])
+
+    def blocks(self, max_pairs: int) -> list[tuple[int, int]]:
+        """Row ranges [r0, r1) covering all rows, each holding at most `max_pairs` pairs (or one row)."""
+        out: list[tuple[int, int]] = []
+        r0 = 0
+        while r0 < self.n:
+            r1 = int(np.searchsorted(self.offsets, self.offsets[r0] + max_pairs, side="right")) - 1
+            r1 = min(max(r1, r0 + 1), self.n)
+            out.append((r0, r1))
+            r0 = r1
+        return out
+
+    def fill(self, r0: int = 0, r1: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(i, j, inside) of the pairs of rows [r0, r1), in the caller's indices, contact 0 the smaller index.
+
+        Sorted by (i, j) within the block; blocks concatenate to the order of `antipodal_pairs` when the points
+        were already in `grid_order`.
+        """
+        r1 = self.n if r1 is None else r1
+        m = int(self.offsets[r1] - self.offsets[r0])
+        if m == 0:
+            e = np.zeros(0, dtype=np.int64)
+            return e, e.copy(), np.zeros(0, dtype=np.bool_)
+        out_j = np.empty(m, dtype=np.int64)
+        out_inside = np.empty(m, dtype=np.bool_)
+        counters = np.zeros((0, 3), dtype=np.int64)
+        _pairs_kernel(*self._args, True, self.offsets, out_j, out_inside, counters, r0, r1)
+        out_i = np.repeat(np.arange(r0, r1, dtype=np.int64), np.diff(self.offsets[r0 : r1 + 1]))
+        if self.identity:
+            return out_i, out_j, out_inside
+        # back to the caller's indices, contact 0 = the smaller original index
+        oi, oj = self.order[out_i], self.order[out_j]
+        i_final, j_final = np.minimum(oi, oj), np.maximum(oi, oj)
+        key = np.lexsort((j_final, i_final))
+        return i_final[key], j_final[key], out_inside[key]
+
+
+def pair_plan(
+    points: np.ndarray,
+    normals: np.ndarray,
+    *,
+    stroke: float,
+    min_width: float,
+    friction: float,
+    safety_factor: float,
+    inside: bool,
+    finger_thickness: float,
+) -> PairPlan:
+    """Count the pairs passing (a)-(c) without storing them (see PairPlan); arguments as for antipodal_pairs."""
+    return PairPlan(
+        points,
+        normals,
+        stroke=stroke,
+        min_width=min_width,
+        friction=friction,
+        safety_factor=safety_factor,
+        inside=inside,
+        finger_thickness=finger_thickness,
+    )
 
 
 def antipodal_pairs(
@@ -258,53 +371,25 @@ def antipodal_pairs(
     [min_width + 2 finger_thickness, stroke + 2 finger_thickness] (the fingers' own thickness sits between the
     contacts).
     """
-    p = np.ascontiguousarray(points, dtype=np.float64)
-    nrm = np.ascontiguousarray(normals, dtype=np.float64)
-    n = len(p)
-    total = n * (n - 1) // 2
-    out_lo, out_hi = float(min_width), float(stroke)
-    in_lo, in_hi = float(min_width + 2 * finger_thickness), float(stroke + 2 * finger_thickness)
-    lo = out_lo if not inside else min(out_lo, in_lo)
-    hi = out_hi if not inside else max(out_hi, in_hi)
-    if n < 2:
-        e = np.zeros(0, dtype=np.int64)
-        return PairResult(e, e, np.zeros(0, bool), total, total, 0, 0)
-    cos_lim = math.cos(cone_half_angle_rad(friction, safety_factor))
-    # cells of half the reach keep the visited volume near the sphere of radius `hi`
-    cell = max(pair_cell_size(stroke, inside, finger_thickness), 1e-6)
-    order, cell_start, dims, origin = _grid(p, cell)
-    ps, ns = p[order], nrm[order]
-    soa = tuple(np.ascontiguousarray(a[:, k]) for a in (ps, ns) for k in range(3))
-    lims = np.array([lo * lo, hi * hi, out_lo**2, out_hi**2, in_lo**2, in_hi**2, cos_lim**2])
-    counters = np.zeros((n, 3), dtype=np.int64)
-    offsets = np.zeros(n + 1, dtype=np.int64)
-    args = (*soa, cell_start, dims, origin, cell, 2, lims, bool(inside))
-    _pairs_kernel(*args, False, offsets, np.zeros(0, np.int64), np.zeros(0, np.bool_), counters)
-    counts = counters[:, 0]
-    np.cumsum(counts, out=offsets[1:])
-    m = int(offsets[-1])
-    out_j = np.empty(m, dtype=np.int64)
-    out_inside = np.empty(m, dtype=np.bool_)
-    _pairs_kernel(*args, True, offsets, out_j, out_inside, counters)
-    out_i = np.repeat(np.arange(n, dtype=np.int64), counts)
-    if np.array_equal(order, np.arange(n)):
-        i_final, j_final, inside_final = out_i, out_j, out_inside
-    else:
-        # back to the caller's indices, contact 0 = the smaller original index
-        oi, oj = order[out_i], order[out_j]
-        i_final, j_final = np.minimum(oi, oj), np.maximum(oi, oj)
-        key = np.lexsort((j_final, i_final))
-        i_final, j_final, inside_final = i_final[key], j_final[key], out_inside[key]
-    rejected_outside = int(counters[:, 1].sum())
-    rejected_friction = int(counters[:, 2].sum()) - m
+    plan = pair_plan(
+        points,
+        normals,
+        stroke=stroke,
+        min_width=min_width,
+        friction=friction,
+        safety_factor=safety_factor,
+        inside=inside,
+        finger_thickness=finger_thickness,
+    )
+    i, j, ins = plan.fill()
     return PairResult(
-        i=i_final,
-        j=j_final,
-        inside=inside_final,
-        pairs_total=total,
-        rejected_stroke=total - m - rejected_outside - rejected_friction,
-        rejected_outside=rejected_outside,
-        rejected_friction=rejected_friction,
+        i=i,
+        j=j,
+        inside=ins,
+        pairs_total=plan.pairs_total,
+        rejected_stroke=plan.rejected_stroke,
+        rejected_outside=plan.rejected_outside,
+        rejected_friction=plan.rejected_friction,
     )
 
 

@@ -22,18 +22,18 @@ from .params import Params
 from .parts import Part, load_part
 from .transforms import grasp_frames, roll_angles_rad
 
-__all__ = ["generate", "recluster", "STAGES", "MAX_PAIR_CANDIDATES", "choose_roll"]
+__all__ = ["generate", "recluster", "STAGES", "MAX_CANDIDATES", "choose_roll"]
 
 #: the stages reported to progress callbacks, in order ("validate" only with validate=True)
 STAGES = ("load", "sample", "pairs", "collision", "cluster", "validate", "export")
-#: the collision stage reports progress this many times
+#: the collision stage reports progress at least this many times
 _COLLISION_BATCHES = 10
-#: pairs passing (a)-(c) beyond this are refused before the collision stage allocates for them (about 8 GB): all of
-#: them are held at once. The thick ring at 30,000 points passes ~14 M pairs and peaks at 2.9 GB; at 100,000 points
-#: ~150 M pairs would need more than 30 GB
-MAX_PAIR_CANDIDATES = 40_000_000
-#: measured peak bytes per pair passing (a)-(c), through collision and clustering (thick ring, 30k points)
-_BYTES_PER_PAIR = 210
+#: pairs passing (a)-(c) are made and collision-checked this many at a time (about 120 bytes each while in flight),
+#: so memory is bounded by the candidates that survive, not by the pairs: at 10,000 points one block holds them all
+_PAIR_BLOCK = 4_000_000
+#: collision-free candidates beyond this stop the run with a clear error (about 130 bytes each are kept, and
+#: clustering, coverage and the candidate export work on all of them: 50 M is about 10 GB at the peak)
+MAX_CANDIDATES = 50_000_000
 
 Progress = Callable[[str, float], None]
 
@@ -117,7 +117,7 @@ def generate(
     report("pairs", 0.0)
     t0 = time.perf_counter()
     half_angle = antipodal.cone_half_angle_rad(mu, params.safety_factor)
-    pairs = antipodal.antipodal_pairs(
+    plan = antipodal.pair_plan(
         pts,
         nrm,
         stroke=spec.stroke,
@@ -128,58 +128,32 @@ def generate(
         finger_thickness=spec.finger_thickness,
     )
     timings["pairs"] = time.perf_counter() - t0
-    if len(pairs.i) > MAX_PAIR_CANDIDATES:
-        gb = len(pairs.i) * _BYTES_PER_PAIR / 1e9
-        raise InvalidParameterError(
-            f"{len(pairs.i):,} pairs pass criteria (a)-(c) at {len(pts):,} points, more than the "
-            f"{MAX_PAIR_CANDIDATES:,} this run may hold (about {gb:.0f} GB): use fewer points (pairs grow with the "
-            f"square of the points; about {int(len(pts) * (MAX_PAIR_CANDIDATES / len(pairs.i)) ** 0.5):,} would fit)",
-            field="points",
-        )
     report("pairs", 1.0)
 
     report("collision", 0.0)
-    t0 = time.perf_counter()
-    d = pts[pairs.j] - pts[pairs.i]
-    widths = np.linalg.norm(d, axis=1)
-    axes = d / widths[:, None] if len(d) else np.zeros((0, 3))
-    mids = 0.5 * (pts[pairs.i] + pts[pairs.j])
-    model = _collision.collision_model(spec, params.collision)
-    free = np.zeros((len(mids), params.rolls), dtype=bool)
-    # in batches, so that progress (and a cancel) is reported within the longest stage
-    bounds = np.linspace(0, len(mids), _COLLISION_BATCHES + 1).astype(np.int64)
-    for b, (lo, hi) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
-        if hi > lo:
-            sl = slice(lo, hi)
-            free[sl] = _collision.free_rolls(
-                pts, nrm, mids[sl], axes[sl], widths[sl], pairs.inside[sl], model, params.rolls
-            )
-        report("collision", (b + 1) / _COLLISION_BATCHES)
-    keep = free.any(axis=1)
-    timings["collision"] = time.perf_counter() - t0
+    ci, cj, free, inside = _collide_in_blocks(plan, pts, nrm, spec, params, timings, report)
 
-    ci, cj = pairs.i[keep], pairs.j[keep]
     cands = Candidates(
         contacts=np.stack([pts[ci], pts[cj]], axis=1).reshape(-1, 2, 3),
         normals=np.stack([nrm[ci], nrm[cj]], axis=1).reshape(-1, 2, 3),
-        free_rolls=free[keep],
+        free_rolls=free,
         roll_angles_rad=roll_angles_rad(params.rolls),
-        friction_margin_deg=antipodal.friction_margin_deg(pts, nrm, ci, cj, pairs.inside[keep], half_angle),
-        inside=pairs.inside[keep],
-        labels=np.full((int(keep.sum()), 2), -1, dtype=np.int32),
+        friction_margin_deg=antipodal.friction_margin_deg(pts, nrm, ci, cj, inside, half_angle),
+        inside=inside,
+        labels=np.full((len(ci), 2), -1, dtype=np.int32),
         medoids=np.zeros(0, dtype=np.int64),
     )
     if extras.select != "medoid":
         cands = _with_quality(cands, part, pts, nrm, spec, mu, params)
     rejected = {
-        "stroke": pairs.rejected_stroke,
-        "outside": pairs.rejected_outside,
-        "friction": pairs.rejected_friction,
-        "collision": int(len(keep) - keep.sum()),
+        "stroke": plan.rejected_stroke,
+        "outside": plan.rejected_outside,
+        "friction": plan.rejected_friction,
+        "collision": plan.accepted - len(cands),
     }
     stats: dict[str, Any] = {
         "points": len(pts),
-        "pairs_total": pairs.pairs_total,
+        "pairs_total": plan.pairs_total,
         "rejected": rejected,
         "candidates": len(cands),
         "timings_s": timings,
@@ -189,7 +163,7 @@ def generate(
         "warnings": list(part.warnings),
     }
     if len(cands) == 0:
-        stats["empty_reason"] = _empty_reason(rejected, pairs.pairs_total, spec, params, mu, pts, nrm)
+        stats["empty_reason"] = _empty_reason(rejected, plan.pairs_total, spec, params, mu, pts, nrm)
 
     obj = {
         "name": object_name or part.name,
@@ -204,6 +178,63 @@ def generate(
 
         record_run(recording, result, sample_points=pts, sample_normals=nrm)
     return result
+
+
+def _collide_in_blocks(plan, pts, nrm, spec: GripperSpec, params: Params, timings, report):
+    """Criterion (d) for every pair of `plan`, streamed in blocks of `_PAIR_BLOCK` pairs.
+
+    Returns the surviving pairs (ci, cj), their free-roll masks and inside flags, in the order of
+    `antipodal_pairs`. Filling the pairs counts as the pairs stage, the rest as the collision stage.
+    """
+    model = _collision.collision_model(spec, params.collision)
+    m = plan.accepted
+    # progress (and a cancel) at least every m / _COLLISION_BATCHES pairs, within the longest stage
+    step = max(-(-m // _COLLISION_BATCHES), 1)
+    kept_i: list[np.ndarray] = []
+    kept_j: list[np.ndarray] = []
+    kept_free: list[np.ndarray] = []
+    kept_inside: list[np.ndarray] = []
+    n_kept = 0
+    t_fill = t_coll = 0.0
+    for r0, r1 in plan.blocks(_PAIR_BLOCK):
+        t0 = time.perf_counter()
+        bi, bj, bins = plan.fill(r0, r1)
+        p0 = int(plan.offsets[r0])
+        d = pts[bj] - pts[bi]
+        widths = np.linalg.norm(d, axis=1)
+        axes = d / widths[:, None] if len(d) else np.zeros((0, 3))
+        mids = 0.5 * (pts[bi] + pts[bj])
+        t_fill += time.perf_counter() - t0
+        t0 = time.perf_counter()
+        free = np.zeros((len(bi), params.rolls), dtype=bool)
+        # segment boundaries: the block's ends and every multiple of `step` inside it
+        cuts = np.unique(np.r_[0, np.arange(-p0 % step, len(bi), step), len(bi)])
+        for lo, hi in zip(cuts[:-1], cuts[1:], strict=True):
+            sl = slice(int(lo), int(hi))
+            free[sl] = _collision.free_rolls(pts, nrm, mids[sl], axes[sl], widths[sl], bins[sl], model, params.rolls)
+            report("collision", (p0 + int(hi)) / m)
+        keep = free.any(axis=1)
+        n_kept += int(keep.sum())
+        if n_kept > MAX_CANDIDATES:
+            raise InvalidParameterError(
+                f"more than {MAX_CANDIDATES:,} collision-free candidates at {len(pts):,} points (after "
+                f"{p0 + len(bi):,} of the {m:,} pairs that pass criteria (a)-(c)), more than this run may hold: use "
+                f"fewer points (candidates grow with the square of the points)",
+                field="points",
+            )
+        kept_i.append(bi[keep])
+        kept_j.append(bj[keep])
+        kept_free.append(free[keep])
+        kept_inside.append(bins[keep])
+        t_coll += time.perf_counter() - t0
+    timings["pairs"] += t_fill
+    timings["collision"] = t_coll
+    if m == 0:
+        report("collision", 1.0)  # otherwise the last segment reported it
+    if not kept_i:
+        e = np.zeros(0, dtype=np.int64)
+        return e, e.copy(), np.zeros((0, params.rolls), dtype=bool), np.zeros(0, dtype=bool)
+    return np.concatenate(kept_i), np.concatenate(kept_j), np.concatenate(kept_free), np.concatenate(kept_inside)
 
 
 def recluster(

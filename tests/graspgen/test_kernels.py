@@ -8,7 +8,14 @@ import numpy as np
 import pytest
 import trimesh
 
-from graspgen.antipodal import antipodal_pairs, cone_half_angle_rad, friction_margin_deg, grid_order
+from graspgen.antipodal import (
+    antipodal_pairs,
+    cone_half_angle_rad,
+    friction_margin_deg,
+    grid_order,
+    pair_cell_size,
+    pair_plan,
+)
 from graspgen.collision import collision_model, free_rolls
 from graspgen.gripper import GripperSpec
 from graspgen.params import TOLERANCES
@@ -90,6 +97,36 @@ def test_grid_order_gives_the_same_pairs():
     pa = {(int(i), int(j)) for i, j in zip(a.i, a.j, strict=True)}
     pb = {tuple(sorted((int(o[i]), int(o[j])))) for i, j in zip(b.i, b.j, strict=True)}
     assert pa == pb
+
+
+@pytest.mark.parametrize("ordered", [True, False])
+def test_pair_plan_blocks_give_exactly_the_pairs(ordered):
+    """The counting pass plus blocks of rows (ragged, down to one row) equal the one-shot pairs, in any order."""
+    pts, nrm = _sample(_parts()["ring"], 1200)
+    kw = dict(stroke=0.08, min_width=0.0, friction=0.5, safety_factor=1.5, inside=True, finger_thickness=0.01)
+    if ordered:
+        o = grid_order(pts, pair_cell_size(0.08, True, 0.01))
+        pts, nrm = pts[o], nrm[o]
+    whole = antipodal_pairs(pts, nrm, **kw)
+    plan = pair_plan(pts, nrm, **kw)
+    assert plan.accepted == len(whole.i)
+    assert (plan.rejected_stroke, plan.rejected_outside, plan.rejected_friction) == (
+        whole.rejected_stroke,
+        whole.rejected_outside,
+        whole.rejected_friction,
+    )
+    blocks = plan.blocks(997)
+    assert blocks[0][0] == 0 and blocks[-1][1] == len(pts) and len(blocks) > 3
+    assert all(a[1] == b[0] for a, b in zip(blocks[:-1], blocks[1:], strict=True))
+    parts = [plan.fill(r0, r1) for r0, r1 in blocks]
+    assert all(len(p[0]) <= 997 or r1 - r0 == 1 for p, (r0, r1) in zip(parts, blocks, strict=True))
+    i, j, ins = (np.concatenate(x) for x in zip(*parts, strict=True))
+    if ordered:  # blocks concatenate to the very order of antipodal_pairs
+        assert np.array_equal(i, whole.i) and np.array_equal(j, whole.j) and np.array_equal(ins, whole.inside)
+    else:
+        key = np.lexsort((j, i))
+        assert np.array_equal(i[key], whole.i) and np.array_equal(j[key], whole.j)
+        assert np.array_equal(ins[key], whole.inside)
 
 
 @pytest.mark.parametrize("delta_deg, accepted", [(-0.1, True), (0.1, False)])

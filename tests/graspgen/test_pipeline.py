@@ -285,12 +285,37 @@ def test_every_exported_grasp_satisfies_all_criteria(part, friction, safety, rol
     assert sum(rej.values()) + gs.stats["candidates"] == gs.stats["pairs_total"]
 
 
-def test_too_many_pairs_is_a_clear_error_before_collision(monkeypatch):
+def test_too_many_candidates_is_a_clear_error(monkeypatch):
     import graspgen.pipeline as pipeline
 
-    monkeypatch.setattr(pipeline, "MAX_PAIR_CANDIDATES", 100)
+    monkeypatch.setattr(pipeline, "MAX_CANDIDATES", 100)
+    monkeypatch.setattr(pipeline, "_PAIR_BLOCK", 500)
     seen = []
-    with pytest.raises(InvalidParameterError, match=r"pass criteria \(a\)-\(c\) at 500 points.*use fewer points") as e:
-        graspgen.generate(_box(), GRIPPER, units="m", points=500, progress=lambda s, f: seen.append(s))
+    with pytest.raises(InvalidParameterError, match=r"more than 100 collision-free candidates at 500 points") as e:
+        graspgen.generate(_box(), GRIPPER, units="m", points=500, progress=lambda s, f: seen.append((s, f)))
     assert e.value.field == "points"
-    assert "collision" not in seen  # refused before the collision stage allocates
+    assert "use fewer points" in str(e.value)
+    # stopped within the collision stage, after the first block that crossed the limit
+    coll = [f for s, f in seen if s == "collision"]
+    assert coll and max(coll) < 1.0
+    assert "cluster" not in [s for s, _ in seen]
+
+
+def test_streaming_pairs_through_collision_in_blocks_changes_nothing(monkeypatch):
+    """Blocks of a few hundred pairs (many blocks, ragged ends) give the very same candidates and grasps."""
+    import graspgen.pipeline as pipeline
+
+    kw = dict(units="m", points=600, k1=4, k2=2)
+    whole = graspgen.generate(_box(), GRIPPER, **kw)
+    monkeypatch.setattr(pipeline, "_PAIR_BLOCK", 337)
+    seen = []
+    blocked = graspgen.generate(_box(), GRIPPER, progress=lambda s, f: seen.append((s, f)), **kw)
+    rej = whole.stats["rejected"]
+    accepted = whole.stats["pairs_total"] - rej["stroke"] - rej["outside"] - rej["friction"]
+    assert accepted > 337 * 3 and whole.stats["candidates"] > 0  # really several blocks
+    for name in ("contacts", "normals", "free_rolls", "friction_margin_deg", "inside", "labels", "medoids"):
+        assert np.array_equal(getattr(whole.candidates, name), getattr(blocked.candidates, name)), name
+    assert whole.stats["rejected"] == blocked.stats["rejected"]
+    assert [g["pose"] for g in whole.grasps] == [g["pose"] for g in blocked.grasps]
+    coll = [f for s, f in seen if s == "collision"]
+    assert len(coll) >= 11 and coll == sorted(coll) and coll[-1] == 1.0
