@@ -12,6 +12,8 @@ from graspgen.examples import EXAMPLE_GRIPPER
 from graspgen.gripper import SLUG_PATTERN
 
 SLUG = SLUG_PATTERN.pattern
+#: ids and version numbers are PostgreSQL `integer` columns: a larger number is no such row, never a database error
+ID_MAX = 2**31 - 1
 
 _GRIPPER_EXAMPLE = dict(EXAMPLE_GRIPPER)
 _PARAMS_EXAMPLE = {"points": 10000, "safety_factor": 1.5, "rolls": 16, "k1": 16, "k2": 4, "seed": 0}
@@ -144,10 +146,12 @@ class JobRequest(BaseModel):
     )
     kind: Literal["generate", "cluster"] = "generate"
     object: str | None = Field(None, pattern=SLUG, description="object name (generate)")
-    object_version: int | None = Field(None, ge=1, description="default: the newest version")
+    object_version: int | None = Field(None, ge=1, le=ID_MAX, description="default: the newest version")
     gripper: str | None = Field(None, pattern=SLUG, description="gripper name (generate)")
-    gripper_version: int | None = Field(None, ge=1, description="default: the newest version")
-    grasp_set: int | None = Field(None, ge=1, description="cluster: the grasp set whose candidates are re-clustered")
+    gripper_version: int | None = Field(None, ge=1, le=ID_MAX, description="default: the newest version")
+    grasp_set: int | None = Field(
+        None, ge=1, le=ID_MAX, description="cluster: the grasp set whose candidates are re-clustered"
+    )
     params: dict[str, Any] | None = Field(
         None,
         description="generate: any of points, friction, safety_factor, rolls, k1, k2, inside, collision, seed; "
@@ -163,9 +167,9 @@ class JobRequest(BaseModel):
 class BulkItem(BaseModel):
     model_config = ConfigDict(extra="forbid")
     object: str = Field(max_length=200)
-    object_version: int | None = None
+    object_version: int | None = Field(None, ge=1, le=ID_MAX)
     gripper: str = Field(max_length=200)
-    gripper_version: int | None = None
+    gripper_version: int | None = Field(None, ge=1, le=ID_MAX)
     params: dict[str, Any] | None = None
 
 

@@ -16,6 +16,7 @@ from services.common.models import Grasp, GraspSet, Gripper, GripperVersion, Obj
 
 from ..pagination import decode_cursor, encode_cursor
 from ..problems import ApiError
+from ..schemas import ID_MAX
 
 __all__ = [
     "summary_select",
@@ -112,6 +113,14 @@ def summary_out(row: Any) -> dict[str, Any]:
     }
 
 
+def _int_cursor(cursor: str | None) -> list[Any] | None:
+    """An id or rank cursor; a forged one outside the `integer` column's range is a 422, not a database error."""
+    key = decode_cursor(cursor, (int,))
+    if key and not 0 <= key[0] <= ID_MAX:
+        raise ApiError(422, "invalid-cursor", "the cursor is not one this endpoint issued")
+    return key
+
+
 def _id_of(session: Session, model: type, name: str, what: str, status: int = 404) -> int:
     i = session.execute(select(model.id).where(model.name == name)).scalar_one_or_none()
     if i is None:
@@ -122,7 +131,7 @@ def _id_of(session: Session, model: type, name: str, what: str, status: int = 40
 def list_grasp_sets(
     session: Session, *, object: str | None, gripper: str | None, cursor: str | None, limit: int
 ) -> dict[str, Any]:
-    key = decode_cursor(cursor, (int,))
+    key = _int_cursor(cursor)
     q = summary_select()
     if object:
         q = q.where(ObjectModel.name == object)
@@ -248,7 +257,7 @@ def list_grasps(
     limit: int,
 ) -> dict[str, Any]:
     get_grasp_set(session, grasp_set_id)
-    key = decode_cursor(cursor, (int,))
+    key = _int_cursor(cursor)
     q = select(Grasp).where(Grasp.grasp_set_id == grasp_set_id)
     if min_width is not None:
         q = q.where(Grasp.width >= min_width)

@@ -11,12 +11,12 @@ from ..crud import grasp_sets as crud
 from ..deps import ReadDep, ReadSessionDep, SettingsDep, StorageDep
 from ..http import IMMUTABLE, REVALIDATE, BlobCache, blob_response, etag_matches, not_modified
 from ..problems import ApiError
-from ..schemas import SLUG, GraspPage, GraspSetPage
+from ..schemas import ID_MAX, SLUG, GraspPage, GraspSetPage
 from . import problems
 
 router = APIRouter(prefix="/v1", tags=["grasp sets"])
 
-GraspSetId = Annotated[int, Path(ge=1, examples=[17])]
+GraspSetId = Annotated[int, Path(ge=1, le=ID_MAX, examples=[17])]
 
 _EXPORT_RESPONSE: dict[int | str, dict[str, Any]] = {
     200: {
@@ -312,7 +312,7 @@ def get_catalogue_entry(
     gripper: Annotated[str, Path(pattern=SLUG)],
     principal: ReadDep,
     session: ReadSessionDep,
-    version: Annotated[int | None, Query(ge=1)] = None,
+    version: Annotated[int | None, Query(ge=1, le=ID_MAX)] = None,
 ) -> Response:
     ref = crud.catalogue_entry(session, object, gripper, version)
     # a numbered version never changes; "the newest" does, so clients revalidate it with the ETag

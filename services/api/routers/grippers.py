@@ -6,7 +6,7 @@ from fastapi import APIRouter, Body, Path, Query, Response
 
 from ..crud import grippers as crud
 from ..deps import ReadDep, ReadSessionDep, SessionDep, SettingsDep, WriteDep
-from ..schemas import GRIPPER_SPEC_EXAMPLE, SLUG, GripperOut, GripperPage, GripperVersionOut
+from ..schemas import GRIPPER_SPEC_EXAMPLE, ID_MAX, SLUG, GripperOut, GripperPage, GripperVersionOut
 from . import problems
 
 router = APIRouter(prefix="/v1/grippers", tags=["grippers"])
@@ -65,6 +65,6 @@ def get_gripper(name: NameParam, principal: ReadDep, session: ReadSessionDep) ->
     responses=problems(404),
 )
 def get_gripper_version(
-    name: NameParam, version: Annotated[int, Path(ge=1)], principal: ReadDep, session: ReadSessionDep
+    name: NameParam, version: Annotated[int, Path(ge=1, le=ID_MAX)], principal: ReadDep, session: ReadSessionDep
 ) -> dict:
     return crud.get_gripper_version(session, name, version)

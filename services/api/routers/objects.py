@@ -7,13 +7,13 @@ from fastapi import APIRouter, File, Form, Path, Query, Request, Response, Uploa
 from ..crud import objects as crud
 from ..deps import ReadDep, ReadSessionDep, SessionDep, SettingsDep, StorageDep, WriteDep
 from ..http import IMMUTABLE, blob_response
-from ..schemas import SLUG, ObjectOut, ObjectPage, ObjectVersionOut
+from ..schemas import ID_MAX, SLUG, ObjectOut, ObjectPage, ObjectVersionOut
 from . import problems
 
 router = APIRouter(prefix="/v1/objects", tags=["objects"])
 
 NameParam = Annotated[str, Path(pattern=SLUG, examples=["ring-screw"])]
-VersionParam = Annotated[int, Path(ge=1, examples=[3])]
+VersionParam = Annotated[int, Path(ge=1, le=ID_MAX, examples=[3])]
 
 _MEDIA = {"stl": "model/stl", "obj": "model/obj", "glb": "model/gltf-binary", "ply": "application/x-ply"}
 
