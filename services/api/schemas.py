@@ -6,7 +6,7 @@ import uuid
 from datetime import datetime
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from graspgen.examples import EXAMPLE_GRIPPER
 from graspgen.gripper import SLUG_PATTERN
@@ -128,8 +128,28 @@ class GripperPage(Page):
 GRIPPER_SPEC_EXAMPLE = _GRIPPER_EXAMPLE
 
 
+def _has_nul(value: Any) -> bool:
+    if isinstance(value, str):
+        return "\x00" in value
+    if isinstance(value, dict):
+        return any(_has_nul(k) or _has_nul(v) for k, v in value.items())
+    if isinstance(value, (list, tuple)):
+        return any(_has_nul(v) for v in value)
+    return False
+
+
+class _NoNul(BaseModel):
+    """Requests are stored as PostgreSQL JSONB, which cannot hold a NUL character: refuse it as invalid input."""
+
+    @model_validator(mode="after")
+    def _no_nul(self) -> Any:
+        if _has_nul(self.model_dump()):
+            raise ValueError("text must not contain NUL (\\u0000) characters")
+        return self
+
+
 # -- jobs -------------------------------------------------------------------------------------------------------------
-class JobRequest(BaseModel):
+class JobRequest(_NoNul):
     model_config = ConfigDict(
         extra="forbid",
         json_schema_extra={
@@ -164,7 +184,7 @@ class JobRequest(BaseModel):
     )
 
 
-class BulkItem(BaseModel):
+class BulkItem(_NoNul):
     model_config = ConfigDict(extra="forbid")
     object: str = Field(max_length=200)
     object_version: int | None = Field(None, ge=1, le=ID_MAX)
