@@ -313,3 +313,48 @@ def test_auth_failures_do_not_echo_the_token(pg_service):
         assert r.status_code == 401, (header, r.text)
         assert_clean(pg_service, r)
         assert token[:-1] not in r.text
+
+
+# -- found by schemathesis: inputs that reached PostgreSQL and came back as 500s ---------------------------------------
+def test_ids_beyond_the_integer_columns_are_client_errors(pg_service):
+    big = 2**31
+    cursor = __import__("base64").urlsafe_b64encode(f"[{big}]".encode()).decode().rstrip("=")
+    for url in (
+        f"/v1/grasp-sets/{big}",
+        f"/v1/grasp-sets/{10**25}/candidates",
+        f"/v1/grasp-sets/{big}/grasps",
+        f"/v1/grasp-sets?cursor={cursor}",
+        f"/v1/objects/x/versions/{big}",
+        f"/v1/grippers/x/versions/{big}",
+        f"/v1/catalogue/x/y?version={big}",
+    ):
+        r = pg_service.get(url)
+        assert r.status_code == 422, (url, r.text)
+        assert_clean(pg_service, r)
+    before = pg_service.row_counts()
+    for body in (
+        {"object": "x", "gripper": "y", "object_version": big},
+        {"kind": "cluster", "grasp_set": big},
+    ):
+        r = pg_service.post("/v1/jobs", json=body)
+        assert r.status_code == 422, (body, r.text)
+    r = pg_service.post("/v1/bulk-jobs", json={"items": [{"object": "x", "gripper": "y", "gripper_version": big}]})
+    assert r.status_code == 422, r.text
+    assert pg_service.row_counts() == before
+
+
+@pytest.mark.parametrize(
+    "body",
+    [
+        {"items": [{"object": "\x00", "gripper": "pgn-80"}]},
+        {"items": [{"object": "x", "gripper": "y", "params": {"collision": "a\x00b"}}]},
+        {"items": [{"object": "x", "gripper": "y", "params": {"\x00": 1}}]},
+    ],
+    ids=["name", "param-value", "param-key"],
+)
+def test_nul_characters_in_bulk_items_are_refused(pg_service, body):
+    before = pg_service.row_counts()
+    r = pg_service.post("/v1/bulk-jobs", json=body)
+    assert r.status_code == 422 and r.json()["code"] == "validation-error", r.text
+    assert_clean(pg_service, r)
+    assert pg_service.row_counts() == before
