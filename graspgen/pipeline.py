@@ -133,18 +133,34 @@ def generate(
     report("collision", 0.0)
     ci, cj, free, inside = _collide_in_blocks(plan, pts, nrm, spec, params, timings, report)
 
+    fm = antipodal.friction_margin_deg(pts, nrm, ci, cj, inside, half_angle)
+    contacts = np.stack([pts[ci], pts[cj]], axis=1).reshape(-1, 2, 3)
+    normals = np.stack([nrm[ci], nrm[cj]], axis=1).reshape(-1, 2, 3)
+    # every candidate is scored (quality.py): it orders the export, and `best-near-medoid` selects by it. The
+    # contacts are sample points, so the patch flatness is computed once per point
+    com = quality.center_of_mass(part.mesh, part.points)
+    flat = quality.point_flatness(pts, nrm, _patch_radius(spec))
+    terms = quality.quality_terms(
+        contacts,
+        normals,
+        fm,
+        half_angle_deg=quality.half_angle_deg(mu, params.safety_factor),
+        center_of_mass=com,
+        length_scale=_length_scale(part),
+        flatness=np.stack([flat[ci], flat[cj]], axis=1),
+    )
     cands = Candidates(
-        contacts=np.stack([pts[ci], pts[cj]], axis=1).reshape(-1, 2, 3),
-        normals=np.stack([nrm[ci], nrm[cj]], axis=1).reshape(-1, 2, 3),
+        contacts=contacts,
+        normals=normals,
         free_rolls=free,
         roll_angles_rad=roll_angles_rad(params.rolls),
-        friction_margin_deg=antipodal.friction_margin_deg(pts, nrm, ci, cj, inside, half_angle),
+        friction_margin_deg=fm,
         inside=inside,
         labels=np.full((len(ci), 2), -1, dtype=np.int32),
         medoids=np.zeros(0, dtype=np.int64),
+        quality_terms=terms,
+        center_of_mass=com,
     )
-    if extras.select != "medoid":
-        cands = _with_quality(cands, part, pts, nrm, spec, mu, params)
     rejected = {
         "stroke": plan.rejected_stroke,
         "outside": plan.rejected_outside,
@@ -171,7 +187,7 @@ def generate(
         "sha256": part.sha256,
         "source_units": part.source_units,
     }
-    extras = extras.with_part(part)
+    extras = extras.with_part(part, (pts, nrm))
     result = _cluster_and_export(cands, obj, spec, params, mu, stats, report, t_all, list(part.warnings), extras)
     if recording is not None:
         from .recording import record_run
@@ -285,10 +301,11 @@ def recluster(
             "validation, and quality selection of candidates stored without quality terms, need the part (mesh=)",
             field="mesh",
         )
+    surface = None
     if extras.select != "medoid" and cands.quality_terms is None:
-        pts_q, nrm_q = _surface_for_quality(part, params)
-        cands = _with_quality(cands, part, pts_q, nrm_q, spec, mu, params)
-    extras = extras.with_part(part)
+        surface = _surface_for_quality(part, params)
+        cands = _with_quality(cands, part, *surface, spec, mu, params)
+    extras = extras.with_part(part, surface)
     result = _cluster_and_export(
         cands, dict(previous_export["object"]), spec, params, mu, stats, report, t_all, [], extras
     )
@@ -336,20 +353,29 @@ def _cluster_and_export(cands, obj, spec, params, mu, stats, report, t_all, warn
         t0 = time.perf_counter()
         medoids, sim = _validate(cands, labels, medoids, clusters, spec, mu, params, extras, stats, report)
         stats["timings_s"]["validate"] = time.perf_counter() - t0
-    # best first within each translation cluster: (validated grasps first,) larger score or friction margin, then
-    # candidate index
-    key = cands.friction_margin_deg[medoids] if score is None else score[medoids]
+    # best first within each translation cluster: (validated grasps first,) larger quality score, then candidate
+    # index; the score needs only the exported grasps' terms. Without the part (recluster without `mesh` of
+    # candidates stored unscored) the friction margin orders them
+    terms = _export_terms(cands, medoids, extras, spec, mu, params) if len(medoids) else None
+    if terms is not None:
+        key = quality.scores(terms)
+        stats["export_order"] = "quality"
+    else:
+        key = cands.friction_margin_deg[medoids]
+        stats["export_order"] = "friction_margin"
     keys = [medoids, -key]
     if sim is not None:
         keys.append(np.array([not r.success for r in sim], dtype=bool))
     order = np.lexsort((*keys, clusters[:, 0])) if len(medoids) else medoids
     medoids, clusters, sizes, medoid_of = medoids[order], clusters[order], sizes[order], medoid_of[order]
+    if terms is not None:
+        terms, key = terms[order], key[order]
     cands = Candidates(**{**cands.__dict__, "labels": labels, "medoids": medoids})
     grasps = _grasps(cands, medoids, clusters, sizes)
     for r, g in enumerate(grasps):
         m = int(medoids[r])
-        if score is not None:
-            g["quality"] = quality.describe(cands.quality_terms[m], score[m])
+        if terms is not None:
+            g["quality"] = quality.describe(terms[r], key[r])
         if m != medoid_of[r]:
             g["medoid"] = int(medoid_of[r])  # the cluster's medoid this grasp stands in for
         if sim is not None:
@@ -498,6 +524,8 @@ class _Extras:
     repair_limit: int = 4
     sim_workers: int | None = None
     part: Part | None = None
+    #: the sampled surface (points, normals) of `part`, for the flatness term, when the run has it
+    surface: tuple[np.ndarray, np.ndarray] | None = None
 
     @classmethod
     def make(cls, select, validate, density, repair_limit, sim_workers) -> _Extras:
@@ -528,8 +556,8 @@ class _Extras:
             )
         return cls(select, validate, None if density is None else float(density), repair_limit, sim_workers)
 
-    def with_part(self, part: Part | None) -> _Extras:
-        return replace(self, part=part)
+    def with_part(self, part: Part | None, surface: tuple[np.ndarray, np.ndarray] | None = None) -> _Extras:
+        return replace(self, part=part, surface=surface)
 
 
 def _mean(values: np.ndarray) -> float | None:
@@ -544,18 +572,43 @@ def _surface_for_quality(part: Part, params: Params) -> tuple[np.ndarray, np.nda
 def _with_quality(cands: Candidates, part: Part, pts, nrm, spec: GripperSpec, mu: float, params: Params) -> Candidates:
     """The candidates with their quality terms (quality.py) and the part's centre of mass."""
     com = quality.center_of_mass(part.mesh, part.points)
-    terms = quality.quality_terms(
-        cands.contacts,
-        cands.normals,
-        cands.friction_margin_deg,
+    terms = _quality_terms(cands, np.arange(len(cands)), part, com, pts, nrm, spec, mu, params)
+    return Candidates(**{**cands.__dict__, "quality_terms": terms, "center_of_mass": com})
+
+
+def _quality_terms(cands: Candidates, idx, part: Part, com, pts, nrm, spec: GripperSpec, mu: float, params: Params):
+    """Quality terms (len(idx), 3) of candidates `idx`; a row depends on its own candidate only."""
+    return quality.quality_terms(
+        cands.contacts[idx],
+        cands.normals[idx],
+        cands.friction_margin_deg[idx],
         half_angle_deg=quality.half_angle_deg(mu, params.safety_factor),
         center_of_mass=com,
-        length_scale=0.5 * float(np.linalg.norm(part.extents)),
+        length_scale=_length_scale(part),
         surface_points=pts,
         surface_normals=nrm,
-        patch_radius=min(spec.finger_width, spec.finger_depth) / 2,
+        patch_radius=_patch_radius(spec),
     )
-    return Candidates(**{**cands.__dict__, "quality_terms": terms, "center_of_mass": com})
+
+
+def _length_scale(part: Part) -> float:
+    return 0.5 * float(np.linalg.norm(part.extents))
+
+
+def _patch_radius(spec: GripperSpec) -> float:
+    return min(spec.finger_width, spec.finger_depth) / 2
+
+
+def _export_terms(cands: Candidates, idx, extras: _Extras, spec: GripperSpec, mu: float, params: Params):
+    """Quality terms of the exported grasps `idx`, to order the export: from the candidates when they were
+    scored, else computed for these few grasps (cheap); None without the part (recluster without `mesh`)."""
+    if cands.quality_terms is not None:
+        return cands.quality_terms[idx]
+    if extras.part is None:
+        return None
+    pts, nrm = extras.surface if extras.surface is not None else _surface_for_quality(extras.part, params)
+    com = quality.center_of_mass(extras.part.mesh, extras.part.points)
+    return _quality_terms(cands, idx, extras.part, com, pts, nrm, spec, mu, params)
 
 
 def _poses(cands: Candidates, idx: np.ndarray) -> np.ndarray:

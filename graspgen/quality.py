@@ -28,6 +28,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
+from numba import njit, prange
 from scipy.spatial import cKDTree
 
 __all__ = [
@@ -38,6 +39,7 @@ __all__ = [
     "NEAR",
     "SELECT_MODES",
     "quality_terms",
+    "point_flatness",
     "scores",
     "center_of_mass",
     "select_best_near_medoid",
@@ -97,14 +99,16 @@ def quality_terms(
     half_angle_deg: float,
     center_of_mass: np.ndarray,
     length_scale: float,
-    surface_points: np.ndarray,
-    surface_normals: np.ndarray,
-    patch_radius: float,
+    surface_points: np.ndarray | None = None,
+    surface_normals: np.ndarray | None = None,
+    patch_radius: float | None = None,
+    flatness: np.ndarray | None = None,
 ) -> np.ndarray:
     """Terms (n, 3) float64 in [0, 1] (columns `TERMS`) for candidates with contacts and normals (n, 2, 3).
 
     `length_scale` (m): the torque arm at which the torque term reaches 0 (half the part's bounding-box diagonal);
-    `surface_points` / `surface_normals` (k, 3): the sampled surface; `patch_radius` (m): the pad radius.
+    `surface_points` / `surface_normals` (k, 3): the sampled surface; `patch_radius` (m): the pad radius. When the
+    contacts are sample points, pass their `flatness` (n, 2) from `point_flatness` instead (much cheaper).
     """
     contacts = np.asarray(contacts, dtype=np.float64).reshape(-1, 2, 3)
     normals = np.asarray(normals, dtype=np.float64).reshape(-1, 2, 3)
@@ -118,13 +122,60 @@ def quality_terms(
     axis = d / np.linalg.norm(d, axis=1, keepdims=True)
     arm = np.linalg.norm(np.cross(np.asarray(center_of_mass, dtype=np.float64) - mid, axis), axis=1)
     out[:, 1] = np.clip(1.0 - arm / max(length_scale, 1e-12), 0.0, 1.0)
-    out[:, 2] = np.minimum(
-        *(
-            _patch_flatness(contacts[:, k], normals[:, k], surface_points, surface_normals, patch_radius)
-            for k in range(2)
+    if flatness is not None:
+        out[:, 2] = np.asarray(flatness, dtype=np.float64).reshape(n, 2).min(axis=1)
+    else:
+        out[:, 2] = np.minimum(
+            *(
+                _patch_flatness(contacts[:, k], normals[:, k], surface_points, surface_normals, patch_radius)
+                for k in range(2)
+            )
         )
-    )
     return out
+
+
+def point_flatness(points: np.ndarray, normals: np.ndarray, radius: float) -> np.ndarray:
+    """Flatness (k,) of the patch around each sample point: mean(max(0, n_i . n_p)) over the sample points within
+    `radius` (m) of point p (itself included), as `_patch_flatness` gives for a contact at p with normal n_p.
+
+    A compiled pass over a grid of cells `radius` wide: a small part has thousands of points in every patch."""
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    nrm = np.ascontiguousarray(normals, dtype=np.float64).reshape(-1, 3)
+    if len(pts) == 0:
+        return np.ones(0, dtype=np.float64)
+    cell = max(float(radius), 1e-9)
+    origin = pts.min(axis=0)
+    idx = np.floor((pts - origin) / cell).astype(np.int64)
+    dims = idx.max(axis=0) + 1
+    flat = (idx[:, 0] * dims[1] + idx[:, 1]) * dims[2] + idx[:, 2]
+    order = np.argsort(flat, kind="stable")
+    cell_start = np.zeros(int(np.prod(dims)) + 1, dtype=np.int64)
+    np.cumsum(np.bincount(flat, minlength=int(np.prod(dims))), out=cell_start[1:])
+    out = np.empty(len(pts), dtype=np.float64)
+    _flatness_kernel(pts[order], nrm[order], idx[order], cell_start, dims.astype(np.int64), float(radius) ** 2, out)
+    result = np.empty_like(out)
+    result[order] = out
+    return result
+
+
+@njit(parallel=True, cache=True)
+def _flatness_kernel(P, N, cells, cell_start, dims, r2, out):
+    for i in prange(P.shape[0]):
+        total = 0.0
+        count = 0
+        ci, cj, ck = cells[i, 0], cells[i, 1], cells[i, 2]
+        for a in range(max(ci - 1, 0), min(ci + 2, dims[0])):
+            for b in range(max(cj - 1, 0), min(cj + 2, dims[1])):
+                col = (a * dims[1] + b) * dims[2]
+                for j in range(cell_start[col + max(ck - 1, 0)], cell_start[col + min(ck + 2, dims[2])]):
+                    dx = P[j, 0] - P[i, 0]
+                    dy = P[j, 1] - P[i, 1]
+                    dz = P[j, 2] - P[i, 2]
+                    if dx * dx + dy * dy + dz * dz <= r2:
+                        dot = N[j, 0] * N[i, 0] + N[j, 1] * N[i, 1] + N[j, 2] * N[i, 2]
+                        total += min(max(dot, 0.0), 1.0)
+                        count += 1
+        out[i] = total / count
 
 
 def _patch_flatness(c: np.ndarray, nc: np.ndarray, pts: np.ndarray, nrm: np.ndarray, radius: float) -> np.ndarray:

@@ -113,10 +113,12 @@ def test_export_matches_the_contract():
             "cluster_size",
         }
         assert g["friction_margin_deg"] >= 0
-    # best first within each translation cluster
+    # best first within each translation cluster, by the quality score (docs/QUALITY.md), which every grasp carries
+    assert d["stats"]["export_order"] == "quality"
     by_cluster: dict[int, list[float]] = {}
     for g in d["grasps"]:
-        by_cluster.setdefault(g["cluster"][0], []).append(g["friction_margin_deg"])
+        assert set(g["quality"]) >= {"score", "friction", "torque", "flatness"}
+        by_cluster.setdefault(g["cluster"][0], []).append(g["quality"]["score"])
     assert all(v == sorted(v, reverse=True) for v in by_cluster.values())
 
 

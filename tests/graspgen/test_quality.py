@@ -77,6 +77,19 @@ def test_flatness_drops_at_an_edge_and_on_a_curve():
     assert curved < 0.95
 
 
+@pytest.mark.parametrize("radius", [0.002, 0.01, 0.05])
+def test_point_flatness_equals_the_patch_flatness_at_sample_points(radius):
+    """The per-point pass (used for every candidate) gives what the per-contact definition gives at each point."""
+    cyl = trimesh.creation.cylinder(radius=0.012, height=0.03, sections=48)
+    pts, fi = trimesh.sample.sample_surface(cyl, 3000, seed=2)
+    nrm = cyl.face_normals[fi]
+    got = quality.point_flatness(pts, nrm, radius)
+    expect = quality._patch_flatness(pts, nrm, pts, nrm, radius)
+    assert np.allclose(got, expect, rtol=0, atol=1e-12)
+    if radius == 0.01:  # pads on the caps' flat faces and on the curved side differ
+        assert got.min() < 0.99 < got.max()
+
+
 def test_scores_weigh_the_terms():
     terms = np.array([[1.0, 1.0, 1.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
     assert quality.scores(terms) == pytest.approx([1.0, 0.0, quality.WEIGHTS.friction])
@@ -111,9 +124,10 @@ def test_generate_with_best_near_medoid_on_the_bar():
     part = example_part("bar")
     base = graspgen.generate(part, GRIPPER, points=2000, k1=6, k2=2)
     gs = graspgen.generate(part, GRIPPER, points=2000, k1=6, k2=2, select="best-near-medoid")
-    # the default export has none of the optional fields
-    assert all(not ({"quality", "sim", "medoid"} & set(g)) for g in base.grasps)
+    # the default export keeps the paper's medoids, scored (the score orders them), with no stand-ins or simulation
+    assert all(not ({"sim", "medoid"} & set(g)) and "quality" in g for g in base.grasps)
     assert "selection" not in base.stats and "validation" not in base.stats
+    assert np.array_equal(base.candidates.quality_terms, gs.candidates.quality_terms)
     assert len(gs.grasps) == len(base.grasps)
     sel = gs.stats["selection"]
     assert sel["mode"] == "best-near-medoid" and sel["replaced"] >= 1
@@ -146,13 +160,17 @@ def test_recluster_with_quality(tmp_path):
     again = graspgen.recluster(tmp_path / "c.npz", gs.to_json(), k1=4, k2=2, select="best-near-medoid")
     assert [g["candidate"] for g in again.grasps] == [g["candidate"] for g in gs.grasps]
     plain = graspgen.generate(part, GRIPPER, points=1500, k1=4, k2=2)
-    plain.save_candidates(tmp_path / "p.npz")
+    # candidates stored without quality terms (an NPZ written before every candidate was scored)
+    np.savez(tmp_path / "p.npz", **{k: v for k, v in plain.candidates.arrays().items() if k != "quality_terms"})
+    unscored = graspgen.recluster(tmp_path / "p.npz", plain.to_json(), k1=4, k2=2)
+    assert unscored.stats["export_order"] == "friction_margin" and "quality" not in unscored.grasps[0]
     with pytest.raises(InvalidParameterError, match="need the part"):
         graspgen.recluster(tmp_path / "p.npz", plain.to_json(), k1=4, k2=2, select="best-near-medoid")
     with_mesh = graspgen.recluster(
         tmp_path / "p.npz", plain.to_json(), k1=4, k2=2, select="best-near-medoid", mesh=part
     )
     assert with_mesh.stats["selection"]["mean_score_selected"] >= with_mesh.stats["selection"]["mean_score_medoids"]
+    assert with_mesh.stats["export_order"] == "quality"
 
 
 def test_bad_select_is_refused():
