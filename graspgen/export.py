@@ -161,8 +161,27 @@ class GraspSet:
         write_atomic(path, self.to_json_bytes())
 
     def save_candidates(self, path: str | os.PathLike) -> None:
-        import io
+        write_atomic(path, npz_bytes(self.candidates.arrays()))
 
-        buf = io.BytesIO()
-        np.savez_compressed(buf, **self.candidates.arrays())
-        write_atomic(path, buf.getvalue())
+
+#: deflate level of the candidate NPZ: level 1 is about 1.7x faster than numpy's default (6) and the file only ~4 %
+#: larger, since the float arrays hardly compress at any level (bench: 20.7 MB of arrays -> 7.0 / 7.3 MB)
+NPZ_DEFLATE_LEVEL = 1
+
+
+def npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
+    """An NPZ (read by `np.load`) of `arrays`, deflated at `NPZ_DEFLATE_LEVEL`, with fixed member timestamps: the
+    same arrays give the same bytes (numpy's savez stamps the current time)."""
+    import io
+    import zipfile
+
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        for name, a in arrays.items():
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info._compresslevel = NPZ_DEFLATE_LEVEL  # noqa: SLF001 - ZipFile.open reads the level from here (3.11)
+            info.external_attr = 0o644 << 16
+            with zf.open(info, "w", force_zip64=True) as f:
+                np.lib.format.write_array(f, np.asanyarray(a), allow_pickle=False)
+    return buf.getvalue()

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import math
+import time
+import zipfile
 
 import numpy as np
 import pytest
@@ -120,6 +122,16 @@ def test_export_matches_the_contract():
         assert set(g["quality"]) >= {"score", "friction", "torque", "flatness"}
         by_cluster.setdefault(g["cluster"][0], []).append(g["quality"]["score"])
     assert all(v == sorted(v, reverse=True) for v in by_cluster.values())
+
+
+def test_candidate_npz_is_byte_identical_for_the_same_run(tmp_path):
+    kw = dict(units="m", points=600, k1=3, k2=2)
+    graspgen.generate(_box(), GRIPPER, **kw).save_candidates(tmp_path / "a.npz")
+    time.sleep(2.1)  # zip timestamps have a 2 s resolution: numpy's savez would differ by now
+    graspgen.generate(_box(), GRIPPER, **kw).save_candidates(tmp_path / "b.npz")
+    assert (tmp_path / "a.npz").read_bytes() == (tmp_path / "b.npz").read_bytes()
+    with zipfile.ZipFile(tmp_path / "a.npz") as z:
+        assert all(i.compress_type == zipfile.ZIP_DEFLATED for i in z.infolist())
 
 
 def test_candidate_npz_round_trip_and_recluster(tmp_path):
