@@ -11,6 +11,8 @@
 2. job: time from `POST /v1/jobs` to the job's grasp set being stored (state succeeded), a `--points` job on the
    shipped-size example (a 24 mm x 30 mm cylinder), one warm Celery worker (a small job ran first to compile kernels).
 3. bulk: jobs per minute through two `graspgen worker` processes for a bulk job of `--bulk` parts at `--bulk-points`.
+4. burst: `--burst` separate `POST /v1/jobs` sent at once from as many threads (other parts than the bulk's), the
+   same two workers: every job must finish with exactly one grasp set (none lost, none run twice); throughput.
 
 Everything runs in a fresh PostgreSQL schema and under a fresh Redis key prefix, both removed at the end.
 """
@@ -301,6 +303,52 @@ async def open_loop(url: str, token: str, paths: list[str], rate: float, seconds
     return lat, errors
 
 
+def burst(c: httpx.Client, stack: Stack, args: argparse.Namespace) -> tuple[str, str, str, str]:
+    """`--burst` jobs posted at once by as many threads; waits for all; checks one grasp set per job."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    if not (stack.tmp / "worker2.log").exists():
+        stack.start("worker", "--concurrency", "1", log="worker2.log")
+        stack.wait_log("worker2.log", " ready.")
+    names = []
+    for i in range(args.burst):
+        name = f"burst-part-{i:03d}"
+        c.post(
+            "/v1/objects", files={"file": (f"{name}.stl", _box_stl(1000 + i))}, data={"name": name, "units": "mm"}
+        ).raise_for_status()
+        names.append(name)
+    barrier_t0 = time.perf_counter()
+
+    def post(name: str) -> tuple[int, str]:
+        with httpx.Client(base_url=str(c.base_url), headers=dict(c.headers), timeout=60) as own:
+            r = own.post("/v1/jobs", json={"object": name, "gripper": "pgn-80", "params": {"points": args.bulk_points}})
+            return r.status_code, r.json().get("id", "")
+
+    with ThreadPoolExecutor(max_workers=args.burst) as pool:
+        sent = list(pool.map(post, names))
+    accepted = [jid for code, jid in sent if code in (200, 201, 202) and jid]
+    states: dict[str, str] = {}
+    end = time.monotonic() + args.timeout
+    while len(states) < len(accepted) and time.monotonic() < end:
+        for jid in accepted:
+            if jid not in states:
+                job = c.get(f"/v1/jobs/{jid}").json()
+                if job["state"] in ("succeeded", "failed", "cancelled"):
+                    states[jid] = job["state"]
+        time.sleep(0.2)
+    secs = time.perf_counter() - barrier_t0
+    versions = [len(c.get("/v1/grasp-sets", params={"object": n, "gripper": "pgn-80"}).json()["items"]) for n in names]
+    ok = sum(1 for s in states.values() if s == "succeeded")
+    lost = len(accepted) - len(states)
+    return (
+        f"{args.burst} jobs posted at once, two workers",
+        f"{args.burst} parts x {args.bulk_points} points",
+        f"{secs:.1f} s",
+        f"{ok / secs * 60:.1f} jobs/min; accepted {len(accepted)}/{len(sent)}, succeeded {ok}, unfinished {lost}, "
+        f"grasp sets per part: {min(versions)}-{max(versions)}",
+    )
+
+
 def submit_and_wait(c: httpx.Client, body: dict, timeout: float, path: str = "/v1/jobs") -> tuple[dict, float]:
     t0 = time.perf_counter()
     r = c.post(path, json=body)
@@ -325,7 +373,8 @@ def main() -> int:
     ap.add_argument("--bulk-points", type=int, default=2000)
     ap.add_argument("--web-workers", type=int, default=2, help="API processes (graspgen serve --workers)")
     ap.add_argument("--timeout", type=float, default=600.0, help="per job or bulk, seconds")
-    ap.add_argument("--skip", nargs="*", default=[], choices=["catalogue", "job", "bulk"])
+    ap.add_argument("--burst", type=int, default=50, help="jobs submitted at once (separate requests)")
+    ap.add_argument("--skip", nargs="*", default=[], choices=["catalogue", "job", "bulk", "burst"])
     args = ap.parse_args()
 
     with tempfile.TemporaryDirectory(prefix="graspgen-bench-") as tmp:
@@ -384,6 +433,9 @@ def main() -> int:
                         f"{done / secs * 60:.1f} jobs/min ({parent['summary']})",
                     )
                 )
+
+            if "burst" not in args.skip:
+                rows.append(burst(c, stack, args))
 
             if "catalogue" not in args.skip:
                 t0 = time.perf_counter()
