@@ -14,14 +14,15 @@ _DESCRIPTIONS = {
     409: "Conflict with the resource's state",
     413: "Request body larger than the configured limit",
     422: "Invalid input",
-    503: "Broker unavailable",
+    503: "A dependency (database, broker or artifact storage) is unavailable or lost an artifact; retry later",
 }
 
 
 def problems(*codes: int) -> dict[int | str, dict[str, Any]]:
-    """OpenAPI entries for the problem+json responses a route can give (401 and 403 are on every protected route)."""
+    """OpenAPI entries for the problem+json responses a route can give: 401 and 403 are on every protected route, and
+    503 too (every one reads the database; some read artifacts from storage)."""
     out: dict[int | str, dict[str, Any]] = {}
-    for code in (401, 403, *codes):
+    for code in (401, 403, *codes, 503):
         if code == 304:
             out[code] = {"description": _DESCRIPTIONS[304]}
             continue
