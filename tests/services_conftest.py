@@ -330,7 +330,12 @@ def stop_process(proc, timeout: float = 30.0) -> None:  # type: ignore[no-untype
 
 
 def settings_env(**values: object) -> dict[str, str]:
-    """os.environ plus GRASPGEN_* variables for a subprocess."""
+    """os.environ plus GRASPGEN_* variables for a subprocess.
+
+    The worker's reconciler is off unless `reconcile_interval_s` is given: a session's shared schema holds other tests'
+    queued jobs (sent to queues no worker reads), which a reconciler would send again to its own worker's queue.
+    """
+    values.setdefault("reconcile_interval_s", 0)
     env = {k: v for k, v in os.environ.items() if not k.startswith("GRASPGEN_")}
     env.update({f"GRASPGEN_{k.upper()}": str(v) for k, v in values.items() if v is not None})
     return env

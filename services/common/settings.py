@@ -66,6 +66,13 @@ class Settings(BaseSettings):
     embedded_workers: int = Field(default=1, ge=1, le=64)
     #: progress is written to the job row at most this often (stage changes always)
     progress_interval_s: float = Field(default=0.5, ge=0.0)
+    #: seconds between reconciler passes in each `graspgen worker` (services/worker/reconcile.py; one pass also runs
+    #: when the worker is ready); 0 turns the reconciler off
+    reconcile_interval_s: float = Field(default=60.0, ge=0.0)
+    #: a queued job younger than this is never sent again (its message may still be on its way); and the margin
+    #: (clock skew, a slow final commit) added to job_time_limit_s before a running job whose row stopped changing
+    #: counts as abandoned by a dead worker
+    reconcile_grace_s: int = Field(default=60, ge=0)
 
     # -- serving --------------------------------------------------------------------------------------------------
     host: str = "127.0.0.1"

@@ -17,7 +17,13 @@ __all__ = ["make_celery", "celery_app"]
 def make_celery(settings: Settings) -> Celery:
     broker = settings.broker_url.get_secret_value() if settings.broker_url else "memory://"
     app = Celery("graspgen", broker=broker, set_as_current=False)
-    transport_options: dict[str, object] = {"visibility_timeout": settings.broker_visibility_timeout_s}
+    transport_options: dict[str, object] = {
+        "visibility_timeout": settings.broker_visibility_timeout_s,
+        # look for messages of dead workers (unacknowledged for longer than the visibility timeout) every tenth of the
+        # timeout, at most every 10 s: kombu's default scans only about every 100 s
+        "unacked_restore_interval": max(1, min(10, settings.broker_visibility_timeout_s // 10)),
+        "unacked_restore_throttle": 1,
+    }
     if settings.broker_key_prefix:
         transport_options["global_keyprefix"] = settings.broker_key_prefix
     app.conf.update(
@@ -46,5 +52,7 @@ def make_celery(settings: Settings) -> Celery:
 
 celery_app = make_celery(get_settings())
 
-# registers the tasks on celery_app (`celery -A services.worker.celery_app worker` imports only this module)
+# registers the tasks on celery_app (`celery -A services.worker.celery_app worker` imports only this module), and the
+# reconciler's worker signals (start-up and periodic passes in the main process, a temp directory per prefork child)
+from services.worker import reconcile as _reconcile  # noqa: E402,F401
 from services.worker import tasks as _tasks  # noqa: E402,F401

@@ -114,9 +114,10 @@ class JobRunner:
         return cls(Database(settings), make_storage(settings), settings)
 
     # -- entry point ----------------------------------------------------------------------------------------------
-    def run(self, job_id: str) -> str:
+    def run(self, job_id: str, *, redelivered: bool = True) -> str:
+        """`redelivered=False`: a fresh message, which must not take over a job another worker is running."""
         jid = uuid.UUID(str(job_id))
-        claimed = self._claim(jid)
+        claimed = self._claim(jid, redelivered)
         if isinstance(claimed, str):
             return claimed
         inputs = claimed
@@ -158,7 +159,12 @@ class JobRunner:
         )
 
     # -- claim ----------------------------------------------------------------------------------------------------
-    def _claim(self, jid: uuid.UUID) -> _Inputs | str:
+    def _abandoned(self, job: Job) -> bool:
+        from services.worker.reconcile import abandoned_before
+
+        return job.updated_at < abandoned_before(self.settings)
+
+    def _claim(self, jid: uuid.UUID, redelivered: bool = True) -> _Inputs | str:
         with self.db.session() as s:
             job = s.execute(select(Job).where(Job.id == jid).with_for_update()).scalar_one_or_none()
             if job is None:
@@ -168,6 +174,10 @@ class JobRunner:
                 return job.state  # a redelivery of a finished job
             if job.kind == "bulk":
                 return job.state  # parents are aggregates, never run
+            if job.state == "running" and not redelivered and not self._abandoned(job):
+                # a duplicate message (services/worker/reconcile.py) while another worker runs the job: not a new run
+                log.info("job %s is running elsewhere; duplicate message dropped", jid)
+                return "running"
             if job.cancel_requested:
                 jobs.finish(job, "cancelled")
                 self._parent(s, job)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import os
 import threading
 
 from celery import Task
@@ -18,22 +19,30 @@ __all__ = ["run_job", "get_runner", "set_runner"]
 log = logging.getLogger(__name__)
 
 _runner: JobRunner | None = None
+#: the process that built _runner; None for one installed by set_runner
+_runner_pid: int | None = None
 _runner_lock = threading.Lock()
 
 
 def set_runner(runner: JobRunner | None) -> None:
     """The embedded mode installs the API process's runner (sharing its engine and storage)."""
-    global _runner
-    _runner = runner
+    global _runner, _runner_pid
+    _runner, _runner_pid = runner, None
 
 
 def get_runner() -> JobRunner:
-    # built lazily, so that a prefork child opens its own database connections after the fork
-    global _runner
+    # built lazily, so that a prefork child opens its own database connections after the fork; and built again in a
+    # child forked after the main process made one (on_failure runs there after a hard time limit): the inherited
+    # engine's pooled connections are the parent's sockets
+    global _runner, _runner_pid
     with _runner_lock:
+        if _runner is not None and _runner_pid is not None and _runner_pid != os.getpid():
+            _runner.db.engine.dispose(close=False)  # forget the parent's connections without touching them
+            _runner = None
         if _runner is None:
             settings: Settings = celery_app.conf.graspgen_settings
             _runner = JobRunner.from_settings(settings)
+            _runner_pid = os.getpid()
         return _runner
 
 
@@ -58,5 +67,12 @@ class JobTask(Task):
     max_retries=5,
 )
 def run_job(self: Task, job_id: str) -> str:
-    """Run job `job_id` and return its final state. Redelivery of a finished job does nothing."""
-    return get_runner().run(job_id)
+    """Run job `job_id` and return its final state. Redelivery of a finished job does nothing.
+
+    A `running` job is taken over only from a message whose previous holder is gone: one the broker delivers again
+    (its worker died), a retry of this task, or the in-process pool (which re-queues a dead process's jobs); any other
+    message for it is a duplicate (the reconciler may send one) and does nothing, see services/worker/reconcile.py.
+    """
+    req = self.request
+    redelivered = bool(req.is_eager or req.retries or (req.delivery_info or {}).get("redelivered"))
+    return get_runner().run(job_id, redelivered=redelivered)
