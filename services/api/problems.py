@@ -2,6 +2,12 @@
 
 `type` is a URN naming the problem (`urn:graspgen:problem:<code>`), `code` repeats the slug for clients that switch on
 it. graspgen's own input errors (GraspgenError) map here once; anything unexpected becomes a 500 without internals.
+
+Failing dependencies are 503s with `Retry-After`, never 500s: `storage-unavailable` (an artifact could not be
+written) and `database-unavailable` (a dropped, refused or exhausted connection). A GET or HEAD whose connection
+dropped under it is retried once, transparently, before the 503: reads are idempotent and the pool has been renewed
+by then (services/common/db.py). Other methods are not retried here, since their commit may have gone through; a
+client retries them, with an Idempotency-Key where the route takes one.
 """
 
 from __future__ import annotations
@@ -13,10 +19,21 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from graspgen.errors import GraspgenError
+from services.common.db import is_disconnect, is_unavailable
+from services.common.storage import StorageError
 
-__all__ = ["ApiError", "problem_response", "install_problem_handlers", "PROBLEM_JSON", "problem_schema"]
+__all__ = [
+    "ApiError",
+    "problem_response",
+    "install_problem_handlers",
+    "PROBLEM_JSON",
+    "problem_schema",
+    "DatabaseErrorMiddleware",
+    "RETRY_AFTER_UNAVAILABLE_S",
+]
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +68,9 @@ _CODES = {
     500: "internal-error",
     503: "unavailable",
 }
+
+#: Retry-After of the 503s for a failing database or storage
+RETRY_AFTER_UNAVAILABLE_S = "5"
 
 
 class ApiError(Exception):
@@ -109,6 +129,18 @@ def install_problem_handlers(app: FastAPI) -> None:
             **exc.extra,
         )
 
+    @app.exception_handler(StorageError)
+    async def _storage_error(request: Request, exc: StorageError) -> JSONResponse:
+        log.warning("storage failed on %s %s: %s", request.method, request.url.path, exc)
+        return problem_response(
+            503,
+            "storage-unavailable",
+            "the artifact storage cannot store files right now; nothing was saved, retry later",
+            title="Storage unavailable",
+            instance=request.url.path,
+            headers={"Retry-After": RETRY_AFTER_UNAVAILABLE_S},
+        )
+
     @app.exception_handler(GraspgenError)
     async def _graspgen_error(request: Request, exc: GraspgenError) -> JSONResponse:
         extra = {"field": exc.field} if exc.field else {}
@@ -137,6 +169,70 @@ def install_problem_handlers(app: FastAPI) -> None:
     async def _internal(request: Request, exc: Exception) -> JSONResponse:
         log.exception("unhandled error on %s %s", request.method, request.url.path)
         return problem_response(500, "internal-error", "an internal error occurred", instance=request.url.path)
+
+    # database errors pass the handlers above (none matches them) and reach this middleware, which can retry
+    app.add_middleware(DatabaseErrorMiddleware)
+
+
+class DatabaseErrorMiddleware:
+    """Database failures as 503 problems; a GET or HEAD whose connection dropped is first run once more.
+
+    Sits outside the routes' exception handlers, so it sees the exception itself and can run the request again;
+    only while no response byte was sent (a failure while streaming cannot be turned into a problem any more).
+    """
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        started = False
+        received: list[Message] = []
+
+        async def recording_receive() -> Message:
+            message = await receive()
+            received.append(message)
+            return message
+
+        async def tracking_send(message: Message) -> None:
+            nonlocal started
+            if message["type"] == "http.response.start":
+                started = True
+            await send(message)
+
+        try:
+            await self.app(scope, recording_receive, tracking_send)
+            return
+        except Exception as error:
+            if started or not is_unavailable(error):
+                raise
+            first = error
+        if scope.get("method") in ("GET", "HEAD") and is_disconnect(first):
+            log.info("database connection dropped under %s %s; retrying once", scope["method"], scope.get("path"))
+            replay = list(received)
+
+            async def replaying_receive() -> Message:
+                return replay.pop(0) if replay else await receive()
+
+            try:
+                await self.app(scope, replaying_receive, tracking_send)
+                return
+            except Exception as error:
+                if started or not is_unavailable(error):
+                    raise
+                first = error
+        log.warning("database unavailable on %s %s: %s", scope.get("method"), scope.get("path"), type(first).__name__)
+        response = problem_response(
+            503,
+            "database-unavailable",
+            "the database cannot be reached right now; retry later",
+            title="Database unavailable",
+            instance=scope.get("path"),
+            headers={"Retry-After": RETRY_AFTER_UNAVAILABLE_S},
+        )
+        await response(scope, receive, send)
 
 
 def problem_schema() -> dict[str, Any]:

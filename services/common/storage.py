@@ -3,6 +3,10 @@
 Keys are `sha256/<2 hex>/<64 hex>` and are derived from the bytes only, never from user input. A blob appears whole or
 not at all: the local backend writes a temp file in the same directory, fsyncs and renames it; S3 makes an object
 visible only once its upload completed.
+
+Writes that fail (no space, read-only or unreachable storage) raise StorageError and leave no temp file behind. A blob
+is never changed once written; `delete` exists so that a job whose results were not committed can remove the blobs
+it created (services/worker/runner.py), and anything left unreferenced by a crash is safe to garbage-collect.
 """
 
 from __future__ import annotations
@@ -14,16 +18,41 @@ import shutil
 import tempfile
 from abc import ABC, abstractmethod
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO
 from urllib.parse import urlsplit
 
 from .settings import Settings
 
-__all__ = ["Storage", "LocalStorage", "S3Storage", "StoredBlob", "make_storage", "sha256_file", "blob_key", "check_key"]
+__all__ = [
+    "Storage",
+    "LocalStorage",
+    "S3Storage",
+    "StoredBlob",
+    "StorageError",
+    "make_storage",
+    "sha256_file",
+    "blob_key",
+    "check_key",
+]
 
 _CHUNK = 1024 * 1024
+
+
+class StorageError(Exception):
+    """A blob could not be written: the storage is full, read-only or unreachable. The message names the cause
+    (e.g. "No space left on device"), never a path or a bucket."""
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(reason)
+        self.reason = reason
+
+
+def _reason(error: BaseException) -> str:
+    if isinstance(error, OSError) and error.errno:
+        return os.strerror(error.errno)
+    return type(error).__name__
 
 
 @dataclass(frozen=True)
@@ -31,6 +60,8 @@ class StoredBlob:
     key: str
     sha256: str
     size: int
+    #: this call uploaded the bytes (they were not stored before); not part of the blob's identity
+    created: bool = field(default=False, compare=False)
 
 
 def blob_key(sha256: str) -> str:
@@ -60,23 +91,42 @@ class Storage(ABC):
     """put_* return the blob's key; the same bytes always give the same key and are stored once."""
 
     def put_file(self, path: str | Path) -> StoredBlob:
+        """Store a local file; raises StorageError when the storage cannot take it."""
         digest, size = sha256_file(path)
         key = blob_key(digest)
-        if not self.exists(key):
+        try:
+            if self.exists(key):
+                return StoredBlob(key, digest, size)
             self._upload(Path(path), key)
-        return StoredBlob(key, digest, size)
+        except StorageError:
+            raise
+        except Exception as error:
+            raise StorageError(_reason(error)) from error
+        return StoredBlob(key, digest, size, created=True)
 
     def put_bytes(self, data: bytes) -> StoredBlob:
+        """Store bytes; raises StorageError when the storage cannot take them."""
         digest = hashlib.sha256(data).hexdigest()
         key = blob_key(digest)
-        if not self.exists(key):
-            with tempfile.NamedTemporaryFile(prefix="graspgen-put-", delete=False) as tmp:
-                tmp.write(data)
-            try:
-                self._upload(Path(tmp.name), key)
-            finally:
-                os.unlink(tmp.name)
-        return StoredBlob(key, digest, len(data))
+        try:
+            if self.exists(key):
+                return StoredBlob(key, digest, len(data))
+            self._upload_bytes(data, key)
+        except StorageError:
+            raise
+        except Exception as error:
+            raise StorageError(_reason(error)) from error
+        return StoredBlob(key, digest, len(data), created=True)
+
+    def _upload_bytes(self, data: bytes, key: str) -> None:
+        fd, tmp = tempfile.mkstemp(prefix="graspgen-put-")
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(data)
+            self._upload(Path(tmp), key)
+        finally:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
 
     def get_bytes(self, key: str) -> bytes:
         with self.open(key) as f:
@@ -109,6 +159,10 @@ class Storage(ABC):
         """Raise when the storage cannot be reached."""
 
     @abstractmethod
+    def delete(self, key: str) -> None:
+        """Remove a blob (a missing one is no error). Only for blobs no row references."""
+
+    @abstractmethod
     def _upload(self, path: Path, key: str) -> None: ...
 
 
@@ -134,13 +188,25 @@ class LocalStorage(Storage):
         if not os.access(self.root, os.W_OK):
             raise OSError(f"storage directory {self.root} is not writable")
 
+    def delete(self, key: str) -> None:
+        # the shard directory stays: removing it could race with an upload that has just created it
+        self._path(key).unlink(missing_ok=True)
+
     def _upload(self, path: Path, key: str) -> None:
+        with open(path, "rb") as src:
+            self._write(key, lambda out: shutil.copyfileobj(src, out, _CHUNK))
+
+    def _upload_bytes(self, data: bytes, key: str) -> None:
+        self._write(key, lambda out: out.write(data))  # no intermediate temp file: the bytes go to the final shard
+
+    def _write(self, key: str, fill) -> None:  # type: ignore[no-untyped-def]
+        """A temp file in the blob's own directory, filled, fsynced and renamed into place; removed on any error."""
         final = self._path(key)
         final.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=".tmp-", dir=final.parent)
         try:
-            with os.fdopen(fd, "wb") as out, open(path, "rb") as src:
-                shutil.copyfileobj(src, out, _CHUNK)
+            with os.fdopen(fd, "wb") as out:
+                fill(out)
                 out.flush()
                 os.fsync(out.fileno())
             os.replace(tmp, final)
@@ -205,6 +271,9 @@ class S3Storage(Storage):
 
     def ping(self) -> None:
         self.client.head_bucket(Bucket=self.bucket)
+
+    def delete(self, key: str) -> None:
+        self.client.delete_object(Bucket=self.bucket, Key=self._name(key))
 
     def _upload(self, path: Path, key: str) -> None:
         # upload_file switches to multipart for large files; either way the object appears only when complete

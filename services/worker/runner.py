@@ -13,17 +13,18 @@ import socket
 import tempfile
 import time
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from celery.exceptions import SoftTimeLimitExceeded
 from sqlalchemy import func, insert, select, update
-from sqlalchemy.exc import IntegrityError, OperationalError
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from services.common import jobs
-from services.common.db import Database
+from services.common.db import Database, is_unavailable
 from services.common.models import (
     TERMINAL_STATES,
     Grasp,
@@ -36,7 +37,7 @@ from services.common.models import (
     utcnow,
 )
 from services.common.settings import Settings
-from services.common.storage import Storage, make_storage
+from services.common.storage import Storage, StorageError, StoredBlob, make_storage
 
 __all__ = ["JobRunner", "STAGE_WEIGHTS", "QUALITY_KWARGS", "stage_weights"]
 
@@ -136,8 +137,8 @@ class JobRunner:
 
             if isinstance(exc, Cancelled):
                 return self._end(jid, "cancelled")
-            if isinstance(exc, OperationalError):
-                raise  # the database, not the job, failed: the task retries and the job runs again
+            if is_unavailable(exc):
+                raise  # the database, not the job, failed (after retries): the task retries and the job runs again
             if isinstance(exc, GraspgenError):
                 err = jobs.problem(
                     exc.code, "Invalid input", exc.message, **({"field": exc.field} if exc.field else {})
@@ -351,59 +352,111 @@ class JobRunner:
         candidates: Path,
         rrd: Path,
     ) -> str:
-        export_blob = self.storage.put_bytes(export_bytes)
-        candidates_blob = self.storage.put_file(candidates)
-        rrd_blob = self.storage.put_file(rrd)
-        for attempt in range(3):
-            try:
-                with self.db.session() as s:
-                    job = s.execute(select(Job).where(Job.id == inp.job_id).with_for_update()).scalar_one_or_none()
-                    if job is None or job.state in TERMINAL_STATES:
-                        return job.state if job else "missing"
-                    if job.cancel_requested:
-                        jobs.finish(job, "cancelled")
-                        self._parent(s, job)
-                        return "cancelled"
-                    existing = (
-                        s.execute(
-                            select(GraspSet.id).where(
-                                (GraspSet.job_id == inp.job_id)
-                                | (
-                                    (GraspSet.object_version_id == inp.object_version_id)
-                                    & (GraspSet.gripper_version_id == inp.gripper_version_id)
-                                    & (GraspSet.params_key == inp.params_key)
-                                )
-                            )
+        puts = (
+            lambda: self.storage.put_bytes(export_bytes),
+            lambda: self.storage.put_file(candidates),
+            lambda: self.storage.put_file(rrd),
+        )
+        blobs: list[StoredBlob] = []
+        try:
+            for put in puts:
+                blobs.append(put())
+        except StorageError as exc:
+            return self._storage_failed(inp, blobs, exc)
+
+        def commit(s: Session) -> tuple[str, bool]:
+            """(final state, whether the new grasp set uses this run's blobs); safe to run again."""
+            job = s.execute(select(Job).where(Job.id == inp.job_id).with_for_update()).scalar_one_or_none()
+            if job is None or job.state in TERMINAL_STATES:
+                # finished by another delivery, or a commit that failed on the wire went through after all; either
+                # way _discard keeps whatever a grasp set references
+                return (job.state if job else "missing"), False
+            if job.cancel_requested:
+                jobs.finish(job, "cancelled")
+                self._parent(s, job)
+                return "cancelled", False
+            existing = (
+                s.execute(
+                    select(GraspSet.id).where(
+                        (GraspSet.job_id == inp.job_id)
+                        | (
+                            (GraspSet.object_version_id == inp.object_version_id)
+                            & (GraspSet.gripper_version_id == inp.gripper_version_id)
+                            & (GraspSet.params_key == inp.params_key)
                         )
-                        .scalars()
-                        .first()
                     )
-                    if existing is None:
-                        existing = self._insert_grasp_set(
-                            s, inp, export_blob, candidates_blob.key, rrd_blob.key, stats, grasps
-                        )
-                    job.grasp_set_id = existing
-                    jobs.finish(job, "succeeded")
-                    self._parent(s, job)
-                    return "succeeded"
-            except IntegrityError:
-                # another delivery or an identical job committed first; the next pass links to its grasp set
-                if attempt == 2:
-                    raise
-        raise AssertionError("unreachable")
+                )
+                .scalars()
+                .first()
+            )
+            used = existing is None
+            if existing is None:
+                existing = self._insert_grasp_set(s, inp, blobs, puts, stats, grasps)
+            job.grasp_set_id = existing
+            jobs.finish(job, "succeeded")
+            self._parent(s, job)
+            return "succeeded", used
+
+        # a dropped connection (before or at COMMIT) or a concurrent identical job committing first (IntegrityError):
+        # run the transaction again; it re-reads the job row, so a commit that did go through is not repeated
+        try:
+            state, used = self.db.transaction(commit, retry_on=(IntegrityError,))
+        except StorageError as exc:  # a blob deleted meanwhile could not be written again
+            return self._storage_failed(inp, blobs, exc)
+        if not used:
+            self._discard(inp, blobs)  # cancelled, or linked to an identical job's grasp set: our files are orphans
+        return state
+
+    def _storage_failed(self, inp: _Inputs, blobs: list[StoredBlob], exc: StorageError) -> str:
+        """Fail the job without a grasp set, after removing the blobs it wrote that nothing refers to."""
+        log.warning("job %s: storage failed while writing its results: %s", inp.job_id, exc.reason)
+        self._discard(inp, blobs)
+        return self._end(
+            inp.job_id,
+            "failed",
+            jobs.problem(
+                "storage-unavailable",
+                "Storage unavailable",
+                f"the job's results could not be written to storage ({exc.reason}); nothing was kept",
+                status=503,
+            ),
+        )
+
+    def _discard(self, inp: _Inputs, blobs: list[StoredBlob]) -> None:
+        """Delete the blobs this run created that no row references, under the object row's lock, which
+        `_insert_grasp_set` also holds while it checks its blobs exist (so a concurrent job that found the same bytes
+        already stored either is seen here as a reference, or sees them gone and writes them again)."""
+        mine = {b.key for b in blobs if b.created}
+        if not mine:
+            return
+        try:
+            with self.db.session() as s:
+                s.execute(select(ObjectModel.id).where(ObjectModel.id == inp.object_id).with_for_update())
+                used: set[str] = set()
+                for column in (GraspSet.export_key, GraspSet.candidates_key, GraspSet.recording_key):
+                    used.update(s.execute(select(column).where(column.in_(mine))).scalars())
+                used.update(s.execute(select(ObjectVersion.file_key).where(ObjectVersion.file_key.in_(mine))).scalars())
+                for key in sorted(mine - used):
+                    self.storage.delete(key)
+        except Exception:
+            # unreferenced content-addressed blobs are harmless and safe to garbage-collect later
+            log.warning("job %s: could not delete %d unreferenced blob(s)", inp.job_id, len(mine), exc_info=True)
 
     def _insert_grasp_set(
         self,
         s: Session,
         inp: _Inputs,
-        export_blob,
-        candidates_key: str,
-        rrd_key: str,
+        blobs: list[StoredBlob],
+        puts: tuple[Callable[[], StoredBlob], ...],
         stats: dict[str, Any],
         grasps: list[dict[str, Any]],
-    ) -> int:  # type: ignore[no-untyped-def]
-        # the object row serialises version numbering for all of its grasp sets
+    ) -> int:
+        # the object row serialises version numbering for all of its grasp sets, and blob deletion (_discard)
         s.execute(select(ObjectModel.id).where(ObjectModel.id == inp.object_id).with_for_update())
+        for blob, put in zip(blobs, puts, strict=True):
+            if not self.storage.exists(blob.key):
+                put()  # deleted by a failed job that had written the same bytes: store them again
+        export_blob, candidates_blob, rrd_blob = blobs
         version = (
             s.execute(
                 select(func.max(GraspSet.version)).where(
@@ -427,8 +480,8 @@ class JobRunner:
             export_key=export_blob.key,
             export_sha256=export_blob.sha256,
             export_size=export_blob.size,
-            candidates_key=candidates_key,
-            recording_key=rrd_key,
+            candidates_key=candidates_blob.key,
+            recording_key=rrd_blob.key,
         )
         s.add(gs)
         s.flush()
@@ -437,7 +490,7 @@ class JobRunner:
         return gs.id
 
     def _end(self, jid: uuid.UUID, state: str, error: dict[str, Any] | None = None) -> str:
-        with self.db.session() as s:
+        def end(s: Session) -> str:
             job = s.execute(select(Job).where(Job.id == jid).with_for_update()).scalar_one_or_none()
             if job is None:
                 return "missing"
@@ -447,6 +500,8 @@ class JobRunner:
             self._parent(s, job)
             return state
 
+        return self.db.transaction(end)
+
     def _parent(self, s: Session, job: Job) -> None:
         if job.parent_id is not None:
             s.flush()
@@ -455,7 +510,8 @@ class JobRunner:
     # -- progress -------------------------------------------------------------------------------------------------
     def write_progress(self, jid: uuid.UUID, stage: str, progress: float) -> bool:
         """Store stage and progress; return whether cancellation was requested."""
-        with self.db.session() as s:
+
+        def write(s: Session) -> bool:
             row = s.execute(
                 update(Job)
                 .where(Job.id == jid, Job.state == "running")
@@ -466,6 +522,8 @@ class JobRunner:
                 # no longer running: cancelled while queued-and-claimed, or finished by another delivery
                 return True
             return bool(row[0])
+
+        return self.db.transaction(write)  # an idempotent update: a dropped connection costs a retry, not the job
 
 
 class _Progress:
