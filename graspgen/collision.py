@@ -45,7 +45,8 @@ __all__ = ["MAX_ROLLS", "CollisionModel", "collision_model", "free_rolls"]
 
 #: roll masks are one 64-bit word per candidate
 MAX_ROLLS = 64
-_LEAF = 8  # most points per leaf
+_LEAF = 32  # at most about this many points per leaf (the leaf count is a power of two; 20 per leaf at 10,000
+# points measured 10-25 % faster than 5: fewer node tests per point test)
 _CACHE = 8  # recent blockers kept per thread and phase
 _CHUNK = 4096  # candidates per unit of parallel work (a unit of the stats counters)
 _FINGER_ANGULAR = 4  # per-roll node tests for the fingers once at most this many (symmetric pairs of) rolls are open
