@@ -216,10 +216,7 @@ def _collide_in_blocks(plan, pts, nrm, spec: GripperSpec, params: Params, timing
         t0 = time.perf_counter()
         bi, bj, bins = plan.fill(r0, r1)
         p0 = int(plan.offsets[r0])
-        d = pts[bj] - pts[bi]
-        widths = np.linalg.norm(d, axis=1)
-        axes = d / widths[:, None] if len(d) else np.zeros((0, 3))
-        mids = 0.5 * (pts[bi] + pts[bj])
+        mids, axes, widths = antipodal.pair_geometry(pts, bi, bj)
         t_fill += time.perf_counter() - t0
         t0 = time.perf_counter()
         free = np.zeros((len(bi), params.rolls), dtype=bool)

@@ -28,9 +28,13 @@ def cluster_colours(labels: np.ndarray) -> np.ndarray:
     import colorsys
 
     labels = np.asarray(labels, dtype=np.int64)
-    hues = (labels * 0.618033988749895) % 1.0
-    rgb = np.array([colorsys.hsv_to_rgb(h, 0.75, 0.95) for h in hues]) if len(labels) else np.zeros((0, 3))
-    return (rgb * 255).astype(np.uint8)
+    if not len(labels):
+        return np.zeros((0, 3), dtype=np.uint8)
+    # one conversion per distinct label (a few dozen), not per candidate (hundreds of thousands)
+    distinct, inverse = np.unique(labels, return_inverse=True)
+    hues = (distinct * 0.618033988749895) % 1.0
+    rgb = np.array([colorsys.hsv_to_rgb(h, 0.75, 0.95) for h in hues])
+    return (rgb * 255).astype(np.uint8)[inverse.reshape(-1)]
 
 
 def record_run(

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from graspgen import antipodal
 from graspgen.antipodal import (
     antipodal_pairs,
     cone_half_angle_rad,
@@ -329,3 +330,17 @@ def test_free_rolls_in_batches_equal_one_call():
     assert np.array_equal(
         whole[sel], ref.free_rolls(pts, mids[sel], axes[sel], w[sel], inside[sel], GRIPPER, "swept", 16)
     )
+
+
+def test_pair_geometry_is_numpys_arithmetic_bit_for_bit():
+    rng = np.random.default_rng(5)
+    p = rng.normal(0, 0.03, (500, 3))
+    i = rng.integers(0, 500, 4000)
+    j = (i + 1 + rng.integers(0, 498, 4000)) % 500  # never the same point
+    mids, axes, widths = antipodal.pair_geometry(p, i, j)
+    d = p[j] - p[i]
+    np.testing.assert_array_equal(widths, np.linalg.norm(d, axis=1))
+    np.testing.assert_array_equal(axes, d / np.linalg.norm(d, axis=1)[:, None])
+    np.testing.assert_array_equal(mids, 0.5 * (p[i] + p[j]))
+    e = antipodal.pair_geometry(p, i[:0], j[:0])
+    assert [a.shape for a in e] == [(0, 3), (0, 3), (0,)]
