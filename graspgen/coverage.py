@@ -100,8 +100,9 @@ def coverage_shares(
     # 1e-12 slack: a grasp exactly at the level's edge counts as covered
     r2 = np.array([radius * radius + 1e-12 for radius, _ in levels])
     cos_a = np.array([math.cos(math.radians(a)) - 1e-12 for _, a in levels])
-    covered = _covered(np.ascontiguousarray(P), np.ascontiguousarray(U), np.ascontiguousarray(Ps),
-                       np.ascontiguousarray(Us), r2, cos_a)
+    covered = _covered(
+        np.ascontiguousarray(P), np.ascontiguousarray(U), np.ascontiguousarray(Ps), np.ascontiguousarray(Us), r2, cos_a
+    )
     return tuple(float(covered[k].mean()) for k in range(len(levels)))
 
 

@@ -9,7 +9,6 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-
 from .errors import InvalidGripperError
 
 __all__ = ["GripperSpec", "Box", "SLUG_PATTERN"]

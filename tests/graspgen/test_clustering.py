@@ -342,7 +342,7 @@ def test_two_stage_sampled_directions_lose_under_one_percent_against_a_sample_tw
     P = np.where((np.arange(n) < n // 2)[:, None], [0.0, 0.0, 0.0], [0.2, 0.0, 0.0]) + rng.normal(0, 0.01, (n, 3))
     A = _unit(rng.normal(0, 1, (n, 3)) * [1.0, 0.6, 0.3] + [0.0, 0.0, 0.4])
     t = two_stage(P, A, 2, 4, seed=3)
-    assert clustering.STAGE_TWO_SAMPLE < clustering._default_sample_size(4)
+    assert clustering._default_sample_size(4) > clustering.STAGE_TWO_SAMPLE
     for c in range(2):
         members = np.flatnonzero(t.labels[:, 0] == c)
         assert members.size > clustering.STAGE_TWO_EXACT_LIMIT  # the sampled path
