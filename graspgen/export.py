@@ -6,6 +6,7 @@ import json
 import os
 import tempfile
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -36,15 +37,17 @@ class Candidates:
     quality_terms: np.ndarray | None = None
     center_of_mass: np.ndarray | None = None
 
-    @property
+    # derived once per instance (clustering, coverage, quality and the export each read them; the arrays are
+    # large): cached_property writes the instance __dict__ directly, which a frozen dataclass allows
+    @cached_property
     def midpoints(self) -> np.ndarray:
         return 0.5 * (self.contacts[:, 0] + self.contacts[:, 1])
 
-    @property
+    @cached_property
     def widths(self) -> np.ndarray:
         return np.linalg.norm(self.contacts[:, 1] - self.contacts[:, 0], axis=1)
 
-    @property
+    @cached_property
     def axes(self) -> np.ndarray:
         d = self.contacts[:, 1] - self.contacts[:, 0]
         return d / np.linalg.norm(d, axis=1, keepdims=True)

@@ -367,7 +367,7 @@ def _cluster_and_export(cands, obj, spec, params, mu, stats, report, t_all, warn
     medoids, clusters, sizes, medoid_of = medoids[order], clusters[order], sizes[order], medoid_of[order]
     if terms is not None:
         terms, key = terms[order], key[order]
-    cands = Candidates(**{**cands.__dict__, "labels": labels, "medoids": medoids})
+    cands = replace(cands, labels=labels, medoids=medoids)
     grasps = _grasps(cands, medoids, clusters, sizes)
     for r, g in enumerate(grasps):
         m = int(medoids[r])
@@ -570,7 +570,7 @@ def _with_quality(cands: Candidates, part: Part, pts, nrm, spec: GripperSpec, mu
     """The candidates with their quality terms (quality.py) and the part's centre of mass."""
     com = quality.center_of_mass(part.mesh, part.points)
     terms = _quality_terms(cands, np.arange(len(cands)), part, com, pts, nrm, spec, mu, params)
-    return Candidates(**{**cands.__dict__, "quality_terms": terms, "center_of_mass": com})
+    return replace(cands, quality_terms=terms, center_of_mass=com)
 
 
 def _quality_terms(cands: Candidates, idx, part: Part, com, pts, nrm, spec: GripperSpec, mu: float, params: Params):
