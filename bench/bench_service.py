@@ -8,8 +8,10 @@
    exports are a real export renamed). An open-loop client sends `--rate` requests/s for `--seconds` s (bounded
    count) of `GET /v1/catalogue/{object}/{gripper}` (a random object), then `--page-rate` requests/s of
    `GET /v1/catalogue?gripper=` pages (fleet sync); p50/p99 of each.
-2. job: time from `POST /v1/jobs` to the job's grasp set being stored (state succeeded), a `--points` job on the
-   shipped-size example (a 24 mm x 30 mm cylinder), one warm Celery worker (a small job ran first to compile kernels).
+2. job: time from `POST /v1/jobs` to the job's grasp set being stored (state succeeded), `--job-repeats` jobs of
+   `--points` points (seeds 0, 1, ...: no job reuses a stored set) on each of `--job-parts`: a 24 mm x 30 mm cylinder
+   (the worst case here: 717 k collision-free candidates), the shipped ring-screw example and tless_04; one warm
+   Celery worker (a small job ran first to compile kernels).
 3. bulk: jobs per minute through two `graspgen worker` processes for a bulk job of `--bulk` parts at `--bulk-points`.
 4. burst: `--burst` separate `POST /v1/jobs` sent at once from as many threads (other parts than the bulk's), the
    same two workers: every job must finish with exactly one grasp set (none lost, none run twice); throughput.
@@ -68,6 +70,18 @@ def _cylinder_stl() -> bytes:
     import trimesh
 
     return trimesh.creation.cylinder(radius=12.0, height=30.0, sections=48).export(file_type="stl")
+
+
+def _job_part(name: str) -> tuple[bytes, str] | None:
+    """STL bytes and units of a job-latency part: the cylinder, a shipped example, or a mesh of ../shared/meshes."""
+    from graspgen.examples import EXAMPLES
+
+    if name == "cylinder":
+        return _cylinder_stl(), "mm"
+    if name in EXAMPLES:
+        return EXAMPLES[name]().export(file_type="stl"), "m"
+    path = ROOT.parent / "shared" / "meshes" / f"{name}.stl"
+    return (path.read_bytes(), "mm") if path.is_file() else None
 
 
 def _box_stl(i: int) -> bytes:
@@ -369,6 +383,13 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--page-rate", type=float, default=20.0, help="requests/s for catalogue pages (fleet sync)")
     ap.add_argument("--points", type=int, default=10_000)
+    ap.add_argument(
+        "--job-parts",
+        nargs="*",
+        default=["cylinder", "ring-screw", "tless_04"],
+        help="parts for the job-latency measurement: cylinder (24 x 30 mm), a shipped example, or a ../shared mesh",
+    )
+    ap.add_argument("--job-repeats", type=int, default=3, help="jobs per part (other seeds: no cache hit)")
     ap.add_argument("--bulk", type=int, default=50)
     ap.add_argument("--bulk-points", type=int, default=2000)
     ap.add_argument("--web-workers", type=int, default=2, help="API processes (graspgen serve --workers)")
@@ -396,19 +417,37 @@ def main() -> int:
             rows = []
 
             if "job" not in args.skip:
-                job, secs = submit_and_wait(
-                    c, {"object": "ring", "gripper": "pgn-80", "params": {"points": args.points}}, args.timeout
-                )
-                stats = c.get(f"/v1/grasp-sets/{job['grasp_set']}").json()["stats"] if job["grasp_set"] else {}
-                core = stats.get("timings_s", {}).get("total")
-                rows.append(
-                    (
-                        "job submission -> stored grasp set",
-                        f"{args.points} points",
-                        f"{secs:.2f} s",
-                        f"state {job['state']}, core total {core:.2f} s" if core else job["state"],
+                for part_name in args.job_parts:
+                    got = _job_part(part_name)
+                    if got is None:
+                        print(f"(job part {part_name}: not found, skipped)")
+                        continue
+                    data, units = got
+                    c.post(
+                        "/v1/objects",
+                        files={"file": (f"{part_name}.stl", data)},
+                        data={"name": part_name, "units": units},
+                    ).raise_for_status()
+                    runs = []
+                    for rep in range(args.job_repeats):
+                        params = {"points": args.points, "seed": rep}
+                        job, secs = submit_and_wait(
+                            c, {"object": part_name, "gripper": "pgn-80", "params": params}, args.timeout
+                        )
+                        stats = c.get(f"/v1/grasp-sets/{job['grasp_set']}").json()["stats"] if job["grasp_set"] else {}
+                        runs.append((secs, stats.get("timings_s", {}).get("total"), stats.get("candidates"), job))
+                    secs_all = sorted(r[0] for r in runs)
+                    core_all = sorted(r[1] for r in runs if r[1])
+                    rows.append(
+                        (
+                            f"job submission -> stored grasp set: {part_name}",
+                            f"{args.points} points, {runs[0][2]:,} candidates",
+                            f"median {statistics.median(secs_all):.2f} s "
+                            f"(min {secs_all[0]:.2f}, max {secs_all[-1]:.2f})",
+                            f"{len(runs)} jobs, states {sorted({r[3]['state'] for r in runs})}, core median "
+                            f"{statistics.median(core_all):.2f} s",
+                        )
                     )
-                )
 
             if "bulk" not in args.skip:
                 stack.start("worker", "--concurrency", "1", log="worker2.log")
