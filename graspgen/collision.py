@@ -201,7 +201,7 @@ def _build_tree(P, leaves, pad):
 # -- the kernel --------------------------------------------------------------------------------------------------
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _basis(ax, ay, az, switch):
     # the contract's roll-0 frame: Z0 = object +Z made orthogonal to X (object +X when |X.z| > switch)
     if abs(az) > switch:
@@ -219,7 +219,7 @@ def _basis(ax, ay, az, switch):
     return yx, yy, yz, zx, zy, zz
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _x_ranges(xr, kind_inside, w, model_f):
     """Finger x intervals for one candidate into xr[0:2]; model_f = (t, stroke, min_width, clearance, margin)."""
     t, stroke, min_width, clearance, margin = model_f[0], model_f[1], model_f[2], model_f[3], model_f[4]
@@ -233,12 +233,12 @@ def _x_ranges(xr, kind_inside, w, model_f):
     xr[1, 0], xr[1, 1] = a, b
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _in_rect(y, z, hy, zlo, zhi):
     return abs(y) <= hy and z >= zlo and z <= zhi
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _point_mask(X, Y, Z, p, F, reg, r0, r1, xr, cos_k, sin_k, half, gfac, todo):
     """Rolls within `todo` at which point p lies in one of the regions r0..r1-1 (exact per-roll arithmetic)."""
     qx = X[p] - F[0]
@@ -297,7 +297,7 @@ def _point_mask(X, Y, Z, p, F, reg, r0, r1, xr, cos_k, sin_k, half, gfac, todo):
     return mask
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _popcount(v):
     v = v - ((v >> np.uint64(1)) & np.uint64(0x5555555555555555))
     v = (v & np.uint64(0x3333333333333333)) + ((v >> np.uint64(2)) & np.uint64(0x3333333333333333))
@@ -305,7 +305,7 @@ def _popcount(v):
     return (v * np.uint64(0x0101010101010101)) >> np.uint64(56)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _node_axes_separate(xm, zm, xhr, hy, hzr, p0, p1, p2, y0v, y1v, y2v, z0v, z1v, z2v, cv0, cv1, cv2, nd):
     """Whether one of the node's box axes v_i separates it from the region's box (centre (xm, 0, zm) and half
     extents (xhr, hy, hzr) in the grasp frame): p_i, y_iv, z_iv = v_i . (X, Y, Z) at the roll, cv_i = v_i . (node
@@ -317,7 +317,7 @@ def _node_axes_separate(xm, zm, xhr, hy, hzr, p0, p1, p2, y0v, y1v, y2v, z0v, z1
     return abs(xm * p2 + zm * z2v - cv2) > xhr * abs(p2) + hy * abs(y2v) + hzr * abs(z2v) + nd[14]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _phase(
     F,
     X,
@@ -568,7 +568,7 @@ def _phase(
     return mask, cache_pos
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _axis_dist2(nd, F):
     """Squared distance of a node's centre from the closing axis."""
     cx, cy, cz = nd[0] - F[0], nd[1] - F[1], nd[2] - F[2]
@@ -576,7 +576,7 @@ def _axis_dist2(nd, F):
     return cx * cx + cy * cy + cz * cz - x * x
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _remember(memo, kind, cell, p):
     if cell >= 0 and memo[kind, cell, 0] != p:
         for slot in range(memo.shape[2] - 1, 0, -1):
@@ -584,7 +584,7 @@ def _remember(memo, kind, cell, p):
         memo[kind, cell, 0] = p
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _palm_cell(grid, F, zm, ck, sk):
     """Memo cell of the palm's centre at the roll (cos, sin) = (ck, sk): midpoint + zm Z."""
     zx = ck * F[9] - sk * F[6]
@@ -593,7 +593,7 @@ def _palm_cell(grid, F, zm, ck, sk):
     return _cell(grid, F[0] + zm * zx, F[1] + zm * zy, F[2] + zm * zz)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _cell(grid, x, y, z):
     """Index of the memo cell holding (x, y, z); grid = origin xyz, 1 / cell size, dims xyz. -1 outside."""
     i = int(np.floor((x - grid[0]) * grid[3]))
@@ -605,7 +605,7 @@ def _cell(grid, x, y, z):
     return (i * ny + j) * nz + k
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, error_model="numpy")
 def _free_rolls_kernel(
     mids,
     axes,
