@@ -3,6 +3,8 @@
     .venv/bin/python bench/bench_core.py                  # everything (tens of minutes)
     .venv/bin/python bench/bench_core.py --quick          # example parts and tless_04 only, no 100k run
     .venv/bin/python bench/bench_core.py --kernels-only   # only the kernel tables (criteria (a)-(d)), see below
+    .venv/bin/python bench/bench_core.py --kernels-only --no-scaling --repeat 3   # 10,000 points, median of 3
+    .venv/bin/python bench/bench_core.py --scaling-only   # the pipeline at 10,000, 30,000 and 100,000 points
     git show 03a6016:graspgen/collision.py > /tmp/collision_03a6016.py
     .venv/bin/python bench/bench_core.py --kernels-only --baseline /tmp/collision_03a6016.py   # before/after
 
@@ -162,6 +164,8 @@ def _kernel_child(spec: dict) -> dict:
         collision.free_rolls_stats(wp, wn, sm, sd / w[:, None], w, small.inside, model, 16)
     t0 = clock()
     res = antipodal.antipodal_pairs(pts, nrm, **kw)
+    # the pipeline's pairs stage also makes the pairs' geometry (collision gets midpoints, axes and widths)
+    geom = antipodal.pair_geometry(pts, res.i, res.j)
     t1 = clock()
     out.update(
         pairs_total=res.pairs_total,
@@ -179,14 +183,13 @@ def _kernel_child(spec: dict) -> dict:
         sel = (keep[:, None] + np.arange(4096)[None, :]).ravel()
         sel = sel[sel < len(res.i)]
     out["collision_candidates"] = len(sel)
-    ci, cj, inside = res.i[sel], res.j[sel], res.inside[sel]
-    del res
+    inside = res.inside[sel]
+    mids, axes, w = (a[sel] for a in geom) if len(sel) < len(res.i) else geom
+    del res, geom
     for mode in ("swept", "paper"):
         model = collision.collision_model(gripper, mode)
         t0 = clock()
-        d = pts[cj] - pts[ci]
-        w = np.linalg.norm(d, axis=1)
-        fr, work = collision.free_rolls_stats(pts, nrm, 0.5 * (pts[ci] + pts[cj]), d / w[:, None], w, inside, model, 16)
+        fr, work = collision.free_rolls_stats(pts, nrm, mids, axes, w, inside, model, 16)
         t1 = clock()
         out[mode] = {
             "wall": t1[0] - t0[0],
@@ -208,8 +211,8 @@ def _kernel_child(spec: dict) -> dict:
             args = (
                 pts,
                 nrm,
-                0.5 * (pts[ci] + pts[cj]),
-                d / w[:, None],
+                mids,
+                axes,
                 w,
                 inside,
                 mod.collision_model(gripper, mode),
@@ -225,7 +228,7 @@ def _kernel_child(spec: dict) -> dict:
                 "equal": bool(np.array_equal(base, fr)),
             }
             del base, args
-        del fr, d, w
+        del fr
     if spec.get("numpy"):
         t0 = clock()
         npy = _numpy_abc(pts, nrm, gripper.stroke, math.cos(antipodal.cone_half_angle_rad(gripper.friction, 1.5)))
@@ -235,7 +238,7 @@ def _kernel_child(spec: dict) -> dict:
     return out
 
 
-def _kernel_tables(quick: bool, baseline: str | None = None) -> None:
+def _kernel_tables(quick: bool, baseline: str | None = None, no_scaling: bool = False, repeat: int = 1) -> None:
     parts = [RING_SPEC]
     if (SHARED / "tless_04.stl").is_file():
         parts.insert(0, {"kind": "file", "name": "tless_04", "path": str(SHARED / "tless_04.stl"), "units": "mm"})
@@ -253,7 +256,16 @@ def _kernel_tables(quick: bool, baseline: str | None = None) -> None:
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|")
     rows = {}
     for spec in parts:
-        r = _run({**spec, "points": 10_000, "numpy": True, "baseline": baseline}, kernels=True)
+        runs = [
+            _run({**spec, "points": 10_000, "numpy": k == 0, "baseline": baseline}, kernels=True)
+            for k in range(max(repeat, 1))
+        ]
+        runs.sort(key=lambda r: r["pairs_wall"] + r["swept"]["wall"])
+        r = runs[len(runs) // 2]
+        r["numpy"] = next(x["numpy"] for x in runs if "numpy" in x)
+        if repeat > 1:
+            spread = [f"{x['pairs_wall'] + x['swept']['wall']:.2f}" for x in runs]
+            print(f"({spec['name']}: (a)-(d) swept s over {repeat} processes: {', '.join(spread)}; the median shown)")
         rows[(spec["name"], 10_000)] = r
         sw, pa, wk, npy = r["swept"], r["paper"], r["swept"]["work"], r["numpy"]
         same = "" if npy["accepted"] == r["pairs"] and npy["outside"] == r["rej_outside"] else " MISMATCH"
@@ -287,6 +299,8 @@ def _kernel_tables(quick: bool, baseline: str | None = None) -> None:
     )
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
     sizes = (10_000, 30_000) if quick else (10_000, 30_000, 100_000)
+    if no_scaling:
+        sizes = (10_000,)
     for spec in parts:
         got = []
         for n in sizes:
@@ -301,6 +315,8 @@ def _kernel_tables(quick: bool, baseline: str | None = None) -> None:
                 f"{sw['work']['finger_nodes'] + sw['work']['palm_nodes']:.0f} | {r['peak_mb']:.0f} |",
                 flush=True,
             )
+        if len(got) < 2:
+            continue
         x = [math.log(r["points"]) for r in got]
         for key, f in (
             ("pairs CPU", lambda r: r["pairs_cpu"]),
@@ -334,6 +350,10 @@ def main() -> None:
     ap.add_argument("--scaling-only", action="store_true")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--kernels-only", action="store_true")
+    ap.add_argument("--no-scaling", action="store_true", help="with --kernels-only: the 10,000-point table only")
+    ap.add_argument(
+        "--repeat", type=int, default=1, help="kernel table: processes per part; the one with the median (a)-(d) time"
+    )
     ap.add_argument("--baseline", help="another graspgen/collision.py (e.g. from git show) to time on the same input")
     ap.add_argument("--child")
     ap.add_argument("--kernel-child")
@@ -346,7 +366,7 @@ def main() -> None:
         return
     if args.kernels_only:
         print(f"machine: {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}; gripper pgn-80, 16 rolls")
-        _kernel_tables(args.quick, args.baseline and str(Path(args.baseline).resolve()))
+        _kernel_tables(args.quick, args.baseline and str(Path(args.baseline).resolve()), args.no_scaling, args.repeat)
         return
     from graspgen.examples import EXAMPLES
 
@@ -407,7 +427,8 @@ def main() -> None:
             slope = (y[-1] - y[0]) / (x[-1] - x[0])
             span = f"{rows[0]['points']} -> {rows[-1]['points']}"
             print(f"\n{spec['name']}: {key} time grows as points^{slope:.2f} ({span})")
-    _kernel_tables(args.quick, args.baseline and str(Path(args.baseline).resolve()))
+    if not args.scaling_only:
+        _kernel_tables(args.quick, args.baseline and str(Path(args.baseline).resolve()))
 
 
 if __name__ == "__main__":
