@@ -350,7 +350,7 @@ def main() -> None:
     ap.add_argument("--scaling-only", action="store_true")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--kernels-only", action="store_true")
-    ap.add_argument("--no-scaling", action="store_true", help="with --kernels-only: the 10,000-point table only")
+    ap.add_argument("--no-scaling", action="store_true", help="the 10,000-point table(s) only")
     ap.add_argument(
         "--repeat", type=int, default=1, help="kernel table: processes per part; the one with the median (a)-(d) time"
     )
@@ -398,6 +398,8 @@ def main() -> None:
             f"{r['peak_mb']:.0f} | {npy} |",
             flush=True,
         )
+    if args.no_scaling:
+        return
     print("\nScaling (pairs + collision + cluster, wall):\n")
     print("| part | points | candidates | pairs s | collision s | cluster s | total s | peak MB |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|")

@@ -660,7 +660,9 @@ def _free_rolls_kernel(
                 cell0 = _cell(grid, F[0] - hw * ax, F[1] - hw * ay, F[2] - hw * az)
                 cell1 = _cell(grid, F[0] + hw * ax, F[1] + hw * ay, F[2] + hw * az)
                 # the remembered blockers first (fingers, then palm), then the tree (fingers, then palm): the
-                # fingers are small regions and settle most candidates
+                # fingers are small regions and settle most candidates. The two calls are spelled out: with their
+                # constant arguments the compiler specialises each (one call in a loop over both measured 15-25 %
+                # slower)
                 blocked = np.uint64(0)
                 for walk in (False, True):
                     if blocked == full:
