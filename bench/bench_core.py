@@ -164,8 +164,6 @@ def _kernel_child(spec: dict) -> dict:
         collision.free_rolls_stats(wp, wn, sm, sd / w[:, None], w, small.inside, model, 16)
     t0 = clock()
     res = antipodal.antipodal_pairs(pts, nrm, **kw)
-    # the pipeline's pairs stage also makes the pairs' geometry (collision gets midpoints, axes and widths)
-    geom = antipodal.pair_geometry(pts, res.i, res.j)
     t1 = clock()
     out.update(
         pairs_total=res.pairs_total,
@@ -183,13 +181,13 @@ def _kernel_child(spec: dict) -> dict:
         sel = (keep[:, None] + np.arange(4096)[None, :]).ravel()
         sel = sel[sel < len(res.i)]
     out["collision_candidates"] = len(sel)
-    inside = res.inside[sel]
-    mids, axes, w = (a[sel] for a in geom) if len(sel) < len(res.i) else geom
-    del res, geom
+    ci, cj, inside = res.i[sel], res.j[sel], res.inside[sel]
+    del res
     for mode in ("swept", "paper"):
         model = collision.collision_model(gripper, mode)
         t0 = clock()
-        fr, work = collision.free_rolls_stats(pts, nrm, mids, axes, w, inside, model, 16)
+        # as the pipeline calls it: point index pairs, the kernel derives midpoints, axes and widths
+        fr, work = collision.free_rolls_stats(pts, nrm, None, None, None, inside, model, 16, pairs=(ci, cj))
         t1 = clock()
         out[mode] = {
             "wall": t1[0] - t0[0],
@@ -208,11 +206,13 @@ def _kernel_child(spec: dict) -> dict:
                 mod = importlib.util.module_from_spec(mspec)
                 sys.modules[name] = mod
                 mspec.loader.exec_module(mod)
+            d = pts[cj] - pts[ci]
+            w = np.linalg.norm(d, axis=1)
             args = (
                 pts,
                 nrm,
-                mids,
-                axes,
+                0.5 * (pts[ci] + pts[cj]),
+                d / w[:, None],
                 w,
                 inside,
                 mod.collision_model(gripper, mode),
@@ -227,7 +227,7 @@ def _kernel_child(spec: dict) -> dict:
                 "cpu": t1[1] - t0[1],
                 "equal": bool(np.array_equal(base, fr)),
             }
-            del base, args
+            del base, args, d, w
         del fr
     if spec.get("numpy"):
         t0 = clock()

@@ -25,7 +25,6 @@ __all__ = [
     "cone_half_angle_rad",
     "antipodal_pairs",
     "friction_margin_deg",
-    "pair_geometry",
     "grid_order",
     "pair_cell_size",
 ]
@@ -405,31 +404,3 @@ def friction_margin_deg(
     c1 = np.clip(-sign * np.sum(normals[j] * d, axis=1), -1.0, 1.0)
     worst = np.maximum(np.arccos(c0), np.arccos(c1))
     return np.degrees(half_angle_rad - worst)
-
-
-def pair_geometry(points: np.ndarray, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Midpoints (m, 3), unit closing axes (m, 3), contact 0 -> 1, and widths (m,) of the pairs (i, j).
-
-    The same numbers, bit for bit, as `0.5 * (p[i] + p[j])`, `d / np.linalg.norm(d, axis=1)` with `d = p[j] - p[i]`,
-    in one parallel pass instead of a dozen temporary arrays (0.35 s for 2.5 M pairs in numpy)."""
-    p = np.ascontiguousarray(points, dtype=np.float64)
-    m = len(i)
-    mids = np.empty((m, 3))
-    axes = np.empty((m, 3))
-    widths = np.empty(m)
-    if m:
-        _pair_geometry(p, np.asarray(i, dtype=np.int64), np.asarray(j, dtype=np.int64), mids, axes, widths)
-    return mids, axes, widths
-
-
-@njit(parallel=True, cache=True)
-def _pair_geometry(p, i, j, mids, axes, widths):
-    for q in prange(i.shape[0]):
-        a, b = i[q], j[q]
-        dx, dy, dz = p[b, 0] - p[a, 0], p[b, 1] - p[a, 1], p[b, 2] - p[a, 2]
-        w = np.sqrt(dx * dx + dy * dy + dz * dz)  # numpy's norm adds the squares in this order
-        widths[q] = w
-        axes[q, 0], axes[q, 1], axes[q, 2] = dx / w, dy / w, dz / w
-        mids[q, 0] = 0.5 * (p[a, 0] + p[b, 0])
-        mids[q, 1] = 0.5 * (p[a, 1] + p[b, 1])
-        mids[q, 2] = 0.5 * (p[a, 2] + p[b, 2])

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 import trimesh
 
-from graspgen import antipodal
 from graspgen.antipodal import (
     antipodal_pairs,
     cone_half_angle_rad,
@@ -17,7 +16,7 @@ from graspgen.antipodal import (
     pair_cell_size,
     pair_plan,
 )
-from graspgen.collision import collision_model, free_rolls
+from graspgen.collision import collision_model, free_rolls, free_rolls_of_pairs
 from graspgen.gripper import GripperSpec
 from graspgen.params import TOLERANCES
 from graspgen.transforms import roll_angles_rad
@@ -332,15 +331,20 @@ def test_free_rolls_in_batches_equal_one_call():
     )
 
 
-def test_pair_geometry_is_numpys_arithmetic_bit_for_bit():
-    rng = np.random.default_rng(5)
-    p = rng.normal(0, 0.03, (500, 3))
-    i = rng.integers(0, 500, 4000)
-    j = (i + 1 + rng.integers(0, 498, 4000)) % 500  # never the same point
-    mids, axes, widths = antipodal.pair_geometry(p, i, j)
-    d = p[j] - p[i]
-    np.testing.assert_array_equal(widths, np.linalg.norm(d, axis=1))
-    np.testing.assert_array_equal(axes, d / np.linalg.norm(d, axis=1)[:, None])
-    np.testing.assert_array_equal(mids, 0.5 * (p[i] + p[j]))
-    e = antipodal.pair_geometry(p, i[:0], j[:0])
-    assert [a.shape for a in e] == [(0, 3), (0, 3), (0,)]
+@pytest.mark.parametrize("mode", ["swept", "paper"])
+def test_free_rolls_of_pairs_equals_free_rolls_on_numpys_geometry(mode):
+    """The pipeline's entry point (point index pairs; the kernel derives the geometry) gives the very masks of
+    free_rolls on midpoints, axes and widths made by numpy, on a part with many blocked and free rolls."""
+    pts, nrm = _sample(_parts()["ring"], 1500)
+    res = antipodal_pairs(
+        pts, nrm, stroke=0.08, min_width=0.0, friction=0.5, safety_factor=1.5, inside=True, finger_thickness=0.01
+    )
+    assert len(res.i) > 1000 and res.inside.any() and not res.inside.all()
+    d = pts[res.j] - pts[res.i]
+    w = np.linalg.norm(d, axis=1)
+    model = collision_model(GRIPPER, mode)
+    want = free_rolls(pts, nrm, 0.5 * (pts[res.i] + pts[res.j]), d / w[:, None], w, res.inside, model, 16)
+    got = free_rolls_of_pairs(pts, res.i, res.j, res.inside, model, 16)
+    assert want.any() and not want.all()
+    np.testing.assert_array_equal(got, want)
+    assert free_rolls_of_pairs(pts, res.i[:0], res.j[:0], res.inside[:0], model, 16).shape == (0, 16)
