@@ -7,6 +7,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Path, Query, Request, Response
 
+from ...common.storage import Storage
 from ..crud import grasp_sets as crud
 from ..deps import ReadDep, ReadSessionDep, SettingsDep, StorageDep
 from ..http import IMMUTABLE, REVALIDATE, BlobCache, blob_response, etag_matches, not_modified
@@ -203,14 +204,7 @@ def get_candidates(
     request: Request, grasp_set_id: GraspSetId, principal: ReadDep, session: ReadSessionDep, storage: StorageDep
 ) -> Response:
     gs = crud.get_grasp_set(session, grasp_set_id)
-    return blob_response(
-        request,
-        storage,
-        gs.candidates_key,
-        media_type="application/octet-stream",
-        filename=f"grasp-set-{gs.id}-candidates.npz",
-        cache_control=IMMUTABLE,
-    )
+    return _artifact(request, storage, gs.candidates_key, f"grasp-set-{gs.id}-candidates.npz")
 
 
 @router.get(
@@ -223,13 +217,13 @@ def get_recording(
     request: Request, grasp_set_id: GraspSetId, principal: ReadDep, session: ReadSessionDep, storage: StorageDep
 ) -> Response:
     gs = crud.get_grasp_set(session, grasp_set_id)
+    return _artifact(request, storage, gs.recording_key, f"grasp-set-{gs.id}.rrd")
+
+
+def _artifact(request: Request, storage: Storage, key: str, filename: str) -> Response:
+    """An immutable binary artifact of a grasp set, as a download."""
     return blob_response(
-        request,
-        storage,
-        gs.recording_key,
-        media_type="application/octet-stream",
-        filename=f"grasp-set-{gs.id}.rrd",
-        cache_control=IMMUTABLE,
+        request, storage, key, media_type="application/octet-stream", filename=filename, cache_control=IMMUTABLE
     )
 
 
