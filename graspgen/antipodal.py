@@ -75,7 +75,7 @@ def _grid(points: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np.n
     return order, cell_start, dims.astype(np.int64), origin
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _judge(X, Y, Z, NX, NY, NZ, i, j, lims, inside_ok):
     """(accepted, bad orientation, passes (a) and (b), inside) for the pair (i, j); branch-free."""
     lo2, hi2, out_lo2, out_hi2, in_lo2, in_hi2, cos2 = lims[0], lims[1], lims[2], lims[3], lims[4], lims[5], lims[6]
@@ -96,7 +96,7 @@ def _judge(X, Y, Z, NX, NY, NZ, i, j, lims, inside_ok):
     return acc, in_range & ~(o_out | o_in), pass_ab, ab_in
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _count_run(X, Y, Z, NX, NY, NZ, i, start, stop, lims, inside_ok):
     # no stores in this loop, so that it vectorises
     n_acc = 0
@@ -110,7 +110,7 @@ def _count_run(X, Y, Z, NX, NY, NZ, i, start, stop, lims, inside_ok):
     return n_acc, n_bad, n_ab
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _popcount(v):
     v = v - ((v >> np.uint64(1)) & np.uint64(0x5555555555555555))
     v = (v & np.uint64(0x3333333333333333)) + ((v >> np.uint64(2)) & np.uint64(0x3333333333333333))
@@ -118,7 +118,7 @@ def _popcount(v):
     return (v * np.uint64(0x0101010101010101)) >> np.uint64(56)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _fill_run(X, Y, Z, NX, NY, NZ, i, start, stop, lims, inside_ok, out_j, out_inside, pos, end):
     # 64 pairs at a time: their verdicts packed into a word by a branch-free (vectorised) loop, then the few
     # accepted ones (~3 %) stored in order. The row's count is known from the counting pass: stop at `end`
@@ -140,7 +140,7 @@ def _fill_run(X, Y, Z, NX, NY, NZ, i, start, stop, lims, inside_ok, out_j, out_i
     return pos
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, error_model="numpy")
 def _pairs_kernel(
     X,
     Y,
@@ -194,7 +194,7 @@ def _pairs_kernel(
             )
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _pairs_row(
     X,
     Y,
