@@ -885,6 +885,13 @@ def free_rolls_of_pairs(
     kernel derives them per candidate, so no (m, 3) arrays are made (0.1 s of page faults at 1.6 M pairs)."""
     if len(i) != len(j) or len(i) != len(inside):
         raise ValueError("i, j and inside must have the same length")
+    if len(i):
+        # the kernel reads points[i], points[j] unchecked
+        lo, hi = min(int(np.min(i)), int(np.min(j))), max(int(np.max(i)), int(np.max(j)))
+        if lo < 0 or hi >= len(points):
+            raise ValueError(f"point indices must lie in [0, {len(points)}), got {lo}..{hi}")
+        if np.any(np.asarray(i) == np.asarray(j)):
+            raise ValueError("a pair of a point with itself has no closing axis")
     return _run(points, None, None, None, None, inside, model, rolls, pairs=(i, j))[0]
 
 

@@ -348,3 +348,18 @@ def test_free_rolls_of_pairs_equals_free_rolls_on_numpys_geometry(mode):
     assert want.any() and not want.all()
     np.testing.assert_array_equal(got, want)
     assert free_rolls_of_pairs(pts, res.i[:0], res.j[:0], res.inside[:0], model, 16).shape == (0, 16)
+
+
+def test_free_rolls_of_pairs_refuses_bad_indices():
+    pts, _ = _sample(_parts()["box"], 200)
+    model = collision_model(GRIPPER, "swept")
+    ok = np.array([0, 1]), np.array([5, 7]), np.zeros(2, dtype=bool)
+    assert free_rolls_of_pairs(pts, *ok, model, 16).shape == (2, 16)
+    with pytest.raises(ValueError, match="indices"):
+        free_rolls_of_pairs(pts, np.array([0, 200]), np.array([5, 7]), ok[2], model, 16)
+    with pytest.raises(ValueError, match="indices"):
+        free_rolls_of_pairs(pts, np.array([-1, 1]), np.array([5, 7]), ok[2], model, 16)
+    with pytest.raises(ValueError, match="itself"):
+        free_rolls_of_pairs(pts, np.array([3, 1]), np.array([3, 7]), ok[2], model, 16)
+    with pytest.raises(ValueError, match="same length"):
+        free_rolls_of_pairs(pts, np.array([0]), np.array([5, 7]), ok[2], model, 16)
