@@ -164,7 +164,11 @@ class GraspSet:
         write_atomic(path, self.to_json_bytes())
 
     def save_candidates(self, path: str | os.PathLike) -> None:
-        write_atomic(path, npz_bytes(self.candidates.arrays()))
+        write_atomic(path, self.candidates_npz_bytes())
+
+    def candidates_npz_bytes(self) -> bytes:
+        """The candidate NPZ (CONTRACT.md) as bytes, as save_candidates writes it."""
+        return npz_bytes(self.candidates.arrays())
 
 
 #: deflate level of the candidate NPZ, through ISA-L (the `isal` package): its level 1 compresses the float arrays
