@@ -795,7 +795,7 @@ def _prepare(points, model, rolls):
     full = np.uint64((1 << rolls) - 1) if rolls < 64 else np.uint64(0xFFFFFFFFFFFFFFFF)
     model_f = np.array([model.finger_thickness, model.stroke, model.min_width, model.clearance, model.inner_margin])
     soa = tuple(np.ascontiguousarray(Ps[:, k]) for k in range(3))
-    # memo cells about as wide as a leaf's patch, at most _MEMO_CELLS of them
+    # memo cells _MEMO_H leaf patches wide, at most _MEMO_CELLS of them
     lo = P.min(axis=0)
     ext = np.maximum(P.max(axis=0) - lo, 1e-12)
     h = max(_MEMO_H * float(np.mean(nodes[leaves:, 12] + nodes[leaves:, 13])), 1e-12)
@@ -816,6 +816,8 @@ def _run(points, normals, midpoints, axes, widths, inside, model, rolls, pairs=N
     if not 1 <= rolls <= MAX_ROLLS:
         raise ValueError(f"rolls must be 1..{MAX_ROLLS}")
     m = len(inside)
+    if pairs is not None and not len(pairs[0]) == len(pairs[1]) == m:
+        raise ValueError("i, j and inside must have the same length")
     stats = np.zeros(((m + _CHUNK - 1) // _CHUNK, _STATS), dtype=np.int64)
     if m == 0 or len(points) == 0:
         return np.ones((m, rolls), dtype=bool), stats
@@ -832,6 +834,7 @@ def _run(points, normals, midpoints, axes, widths, inside, model, rolls, pairs=N
     else:
         geometry = (no_rows, no_rows, np.zeros(0))
         i, j = (np.ascontiguousarray(a, dtype=np.int64) for a in pairs)
+        _check_pairs(len(points), i, j)
         index = (np.ascontiguousarray(points, dtype=np.float64), i, j)
     with numba.parallel_chunksize(1):
         _free_rolls_kernel(
@@ -856,6 +859,15 @@ def _run(points, normals, midpoints, axes, widths, inside, model, rolls, pairs=N
             stats,
         )
     return out, stats
+
+
+def _check_pairs(n: int, i: np.ndarray, j: np.ndarray) -> None:
+    """The kernel reads points[i], points[j] unchecked: indices in [0, n), no point paired with itself."""
+    lo, hi = min(int(np.min(i)), int(np.min(j))), max(int(np.max(i)), int(np.max(j)))
+    if lo < 0 or hi >= n:
+        raise ValueError(f"point indices must lie in [0, {n}), got {lo}..{hi}")
+    if np.any(i == j):
+        raise ValueError("a pair of a point with itself has no closing axis")
 
 
 def free_rolls(
@@ -883,15 +895,6 @@ def free_rolls_of_pairs(
     """free_rolls of the candidates (points[i], points[j]), contact 0 = points[i]: (m, rolls) bool, the same masks
     as free_rolls with midpoints 0.5 (p_i + p_j), axes d / |d| and widths |d| (d = p_j - p_i) made by numpy. The
     kernel derives them per candidate, so no (m, 3) arrays are made (0.1 s of page faults at 1.6 M pairs)."""
-    if len(i) != len(j) or len(i) != len(inside):
-        raise ValueError("i, j and inside must have the same length")
-    if len(i):
-        # the kernel reads points[i], points[j] unchecked
-        lo, hi = min(int(np.min(i)), int(np.min(j))), max(int(np.max(i)), int(np.max(j)))
-        if lo < 0 or hi >= len(points):
-            raise ValueError(f"point indices must lie in [0, {len(points)}), got {lo}..{hi}")
-        if np.any(np.asarray(i) == np.asarray(j)):
-            raise ValueError("a pair of a point with itself has no closing axis")
     return _run(points, None, None, None, None, inside, model, rolls, pairs=(i, j))[0]
 
 
