@@ -318,8 +318,82 @@ def _node_axes_separate(xm, zm, xhr, hy, hzr, p0, p1, p2, y0v, y1v, y2v, z0v, z1
     return abs(xm * p2 + zm * z2v - cv2) > xhr * abs(p2) + hy * abs(y2v) + hzr * abs(z2v) + nd[14]
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _probe(
+    F,
+    X,
+    Y,
+    Z,
+    reg,
+    r0,
+    r1,
+    xr,
+    cos_k,
+    sin_k,
+    half,
+    gfac,
+    target,
+    finger,
+    cache,
+    cache_pos,
+    memo,
+    grid,
+    cell0,
+    cell1,
+    st,
+):
+    """Rolls within `target` blocked by regions r0..r1-1 (fingers: r0, r1 = 0, 2; palm: 2, 3) at the remembered
+    blockers: the memo, then the thread's cache. Inlined: most candidates end here, without a call.
+
+    memo[0, cell] holds the points that last blocked a finger whose contact lies in that grid cell, memo[1, cell]
+    those that last blocked a palm whose centre lies in it (shared by the threads: racy hints, never trusted
+    without the exact test); cell0, cell1 are the cells of this candidate's contacts, -1 for none."""
+    mask = np.uint64(0)
+    slots = memo.shape[2]
+    if finger:
+        for cell in (cell0, cell1):
+            if cell < 0:
+                continue
+            for slot in range(slots):
+                p = memo[0, cell, slot]
+                if p < 0:
+                    continue
+                st[6] += 1
+                mask |= _point_mask(X, Y, Z, p, F, reg, r0, r1, xr, cos_k, sin_k, half, gfac, target & ~mask)
+                if mask == target:
+                    st[7] += 1
+                    return mask, cache_pos
+    else:
+        zm = 0.5 * (reg[r0, _ZLO] + reg[r0, _ZHI])
+        for k in range(cos_k.shape[0]):
+            if not (target & ~mask & (np.uint64(1) << np.uint64(k))):
+                continue
+            cell = _palm_cell(grid, F, zm, cos_k[k], sin_k[k])
+            if cell < 0:
+                continue
+            for slot in range(slots):
+                p = memo[1, cell, slot]
+                if p < 0:
+                    continue
+                st[6] += 1
+                mask |= _point_mask(X, Y, Z, p, F, reg, r0, r1, xr, cos_k, sin_k, half, gfac, target & ~mask)
+                if mask == target:
+                    st[7] += 1
+                    return mask, cache_pos
+    for c in range(cache.shape[0]):
+        p = cache[c]
+        if p < 0:
+            continue
+        st[4] += 1
+        mask |= _point_mask(X, Y, Z, p, F, reg, r0, r1, xr, cos_k, sin_k, half, gfac, target & ~mask)
+        if mask == target:
+            st[5] += 1
+            return mask, cache_pos
+    return mask, cache_pos
+
+
 @njit(cache=True, error_model="numpy")
-def _phase(
+def _walk(
     F,
     X,
     Y,
@@ -343,60 +417,11 @@ def _phase(
     grid,
     cell0,
     cell1,
-    probe,
-    walk,
     st,
 ):
-    """Rolls within `target` blocked by regions r0..r1-1 (fingers: r0, r1 = 0, 2; palm: 2, 3): with `probe`, by
-    the remembered blockers; with `walk`, by a traversal of the tree.
-
-    memo[0, cell] holds the points that last blocked a finger whose contact lies in that grid cell, memo[1, cell]
-    those that last blocked a palm whose centre lies in it (shared by the threads: racy hints, never trusted
-    without the exact test); cell0, cell1 are the cells of this candidate's contacts, -1 for none."""
+    """Rolls within `target` blocked by regions r0..r1-1, by a traversal of the tree (see _probe for the memo)."""
     n = X.shape[0]
     mask = np.uint64(0)
-    slots = memo.shape[2]
-    if probe and finger:
-        for cell in (cell0, cell1):
-            if cell < 0:
-                continue
-            for slot in range(slots):
-                p = memo[0, cell, slot]
-                if p < 0:
-                    continue
-                st[6] += 1
-                mask |= _point_mask(X, Y, Z, p, F, reg, r0, r1, xr, cos_k, sin_k, half, gfac, target & ~mask)
-                if mask == target:
-                    st[7] += 1
-                    return mask, cache_pos
-    elif probe:
-        zm = 0.5 * (reg[r0, _ZLO] + reg[r0, _ZHI])
-        for k in range(cos_k.shape[0]):
-            if not (target & ~mask & (np.uint64(1) << np.uint64(k))):
-                continue
-            cell = _palm_cell(grid, F, zm, cos_k[k], sin_k[k])
-            if cell < 0:
-                continue
-            for slot in range(slots):
-                p = memo[1, cell, slot]
-                if p < 0:
-                    continue
-                st[6] += 1
-                mask |= _point_mask(X, Y, Z, p, F, reg, r0, r1, xr, cos_k, sin_k, half, gfac, target & ~mask)
-                if mask == target:
-                    st[7] += 1
-                    return mask, cache_pos
-    for c in range(cache.shape[0] if probe else 0):
-        p = cache[c]
-        if p < 0:
-            continue
-        st[4] += 1
-        mask |= _point_mask(X, Y, Z, p, F, reg, r0, r1, xr, cos_k, sin_k, half, gfac, target & ~mask)
-        if mask == target:
-            st[5] += 1
-            return mask, cache_pos
-    if not walk:
-        return mask, cache_pos
     ax, ay, az = F[3], F[4], F[5]
     ya, yb, yc = F[6], F[7], F[8]
     za, zb, zc = F[9], F[10], F[11]
@@ -676,15 +701,60 @@ def _free_rolls_kernel(
                 hw = 0.5 * w
                 cell0 = _cell(grid, F[0] - hw * ax, F[1] - hw * ay, F[2] - hw * az)
                 cell1 = _cell(grid, F[0] + hw * ax, F[1] + hw * ay, F[2] + hw * az)
-                # the remembered blockers first (fingers, then palm), then the tree (fingers, then palm): the
-                # fingers are small regions and settle most candidates. The two calls are spelled out: with their
-                # constant arguments the compiler specialises each (one call in a loop over both measured 15-25 %
-                # slower)
-                blocked = np.uint64(0)
-                for walk in (False, True):
-                    if blocked == full:
-                        break
-                    more, cache_pos[0] = _phase(
+                # the remembered blockers first (fingers, then palm), inlined: most candidates end there without a
+                # call; then the tree (fingers, then palm). The fingers are small regions and settle most
+                # candidates. The calls are spelled out: with their constant arguments the compiler specialises
+                # each (one call in a loop over both measured 15-25 % slower)
+                blocked, cache_pos[0] = _probe(
+                    F,
+                    X,
+                    Y,
+                    Z,
+                    reg,
+                    0,
+                    2,
+                    xr,
+                    cos_k,
+                    sin_k,
+                    half,
+                    gfac,
+                    full,
+                    True,
+                    caches[0],
+                    cache_pos[0],
+                    tmemo,
+                    grid,
+                    cell0,
+                    cell1,
+                    st,
+                )
+                if blocked != full and nr > 2:
+                    more, cache_pos[1] = _probe(
+                        F,
+                        X,
+                        Y,
+                        Z,
+                        reg,
+                        2,
+                        nr,
+                        xr,
+                        cos_k,
+                        sin_k,
+                        half,
+                        gfac,
+                        full & ~blocked,
+                        False,
+                        caches[1],
+                        cache_pos[1],
+                        tmemo,
+                        grid,
+                        -1,
+                        -1,
+                        st,
+                    )
+                    blocked |= more
+                if blocked != full:
+                    more, cache_pos[0] = _walk(
                         F,
                         X,
                         Y,
@@ -708,14 +778,11 @@ def _free_rolls_kernel(
                         grid,
                         cell0,
                         cell1,
-                        not walk,
-                        walk,
                         st,
                     )
                     blocked |= more
-                    if blocked == full or nr == 2:
-                        continue
-                    more, cache_pos[1] = _phase(
+                if blocked != full and nr > 2:
+                    more, cache_pos[1] = _walk(
                         F,
                         X,
                         Y,
@@ -739,8 +806,6 @@ def _free_rolls_kernel(
                         grid,
                         -1,
                         -1,
-                        not walk,
-                        walk,
                         st,
                     )
                     blocked |= more
