@@ -23,6 +23,7 @@ whole pipeline there, which streams the pairs through collision in blocks (pipel
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -332,6 +333,19 @@ def _kernel_tables(quick: bool, baseline: str | None = None, no_scaling: bool = 
             print(f"\n{spec['name']}: {key} grows as points^{slope:.2f} ({sizes[0]:,} -> {sizes[-1]:,})")
 
 
+def _machine() -> str:
+    """Cores, load and the CPU as numba's compiler sees it: kernel times are only comparable between runs on the same
+    CPU (one session's host was 1.7-1.9x slower on the collision kernel than another's at the same core count)."""
+    import llvmlite.binding as llvm
+
+    llvm.initialize_native_target()
+    flags = ""
+    with contextlib.suppress(OSError, StopIteration):
+        flags = next(ln for ln in Path("/proc/cpuinfo").read_text().splitlines() if ln.startswith("flags"))
+    simd = "AVX-512" if " avx512f" in flags else "AVX2" if " avx2" in flags else "no AVX2"
+    return f"{os.cpu_count()} cores ({llvm.get_host_cpu_name()}, {simd}), load {os.getloadavg()[0]:.1f}"
+
+
 def _run(spec: dict, kernels: bool = False) -> dict:
     r = subprocess.run(
         [sys.executable, __file__, "--kernel-child" if kernels else "--child", json.dumps(spec)],
@@ -365,7 +379,7 @@ def main() -> None:
         print(json.dumps(_kernel_child(json.loads(args.kernel_child))))
         return
     if args.kernels_only:
-        print(f"machine: {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}; gripper pgn-80, 16 rolls")
+        print(f"machine: {_machine()}; gripper pgn-80, 16 rolls")
         _kernel_tables(args.quick, args.baseline and str(Path(args.baseline).resolve()), args.no_scaling, args.repeat)
         return
     from graspgen.examples import EXAMPLES
@@ -377,10 +391,7 @@ def main() -> None:
         parts += [{"kind": "file", "name": Path(f).stem, "path": str(SHARED / f), "units": units[f]} for f in names]
     else:
         print(f"(../shared/meshes not found at {SHARED}: example parts only)")
-    print(
-        f"machine: {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}; gripper pgn-80 (examples/pgn-80.json), "
-        "swept collision, 16 rolls, k1=16 k2=4\n"
-    )
+    print(f"machine: {_machine()}; gripper pgn-80 (examples/pgn-80.json), swept collision, 16 rolls, k1=16 k2=4\n")
     print(
         "| part | points | pairs | rej. stroke | rej. outside | rej. friction | rej. collision | candidates | "
         "sample s | pairs s | collision s | cluster s | total s | CPU s | peak MB | numpy (a)-(c) s |"
