@@ -198,9 +198,14 @@ def _kernel_child(spec: dict) -> dict:
             "work": {k: v / max(len(sel), 1) for k, v in work.items()},
         }
         if spec.get("baseline"):  # another version of graspgen/collision.py, e.g. from git history: same inputs
+            import hashlib
             import importlib.util
 
-            name = "graspgen._collision_baseline"
+            # numba names its cache files by module, function and line: two different files loaded in turn
+            # under one module name from one folder were seen to give wrong masks, so the name carries a hash
+            # of the file's content
+            digest = hashlib.blake2b(Path(spec["baseline"]).read_bytes(), digest_size=6).hexdigest()
+            name = f"graspgen._collision_baseline_{digest}"
             mod = sys.modules.get(name)
             if mod is None:
                 mspec = importlib.util.spec_from_file_location(name, spec["baseline"])
