@@ -588,8 +588,10 @@ def _walk(
                         return mask, cache_pos
         else:
             near_c, far_c = 2 * node, 2 * node + 1
-            if finger and _axis_dist2(nodes[far_c], F) < _axis_dist2(nodes[near_c], F):
-                # the child nearer the axis first: a blocker there blocks most rolls
+            if (_axis_dist2(nodes[far_c], F) < _axis_dist2(nodes[near_c], F)) == finger:
+                # fingers: the child nearer the axis first (a blocker there blocks most rolls); palm: the child
+                # farther from it first (the palm lies beyond the fingers' depth off the axis: 5-30 % fewer palm
+                # nodes and points, cylinder -9 %)
                 near_c, far_c = far_c, near_c
             stack[top] = far_c
             stack[top + 1] = near_c
