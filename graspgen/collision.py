@@ -17,15 +17,17 @@ far beyond rounding error, and every shortcut (a node wholly inside or outside a
 that every roll of a finger covers, the half-turn symmetry of the finger boxes) keeps a guard band and falls
 back to the per-roll test inside it.
 
-Speed: the points live in a bounding-volume hierarchy (a balanced binary tree split along the principal axis;
-per node an oriented box, an axis-aligned box and a ball). A node is skipped when it misses every region's slab
-along the closing axis, its radial band around the axis, or (for the palm, and for the fingers once few rolls
-are open) the region at every open roll: the ball first, for all rolls at once, then (the palm only) both
-boxes projected onto the roll's axes and the node's own axes. A node wholly inside a region at a roll blocks that
-roll at once. Before any traversal, remembered blockers are tried: a memo shared by the threads keyed by the grid
-cell of each contact (fingers) and of the palm's centre at each open roll (palm), and a small per-thread cache;
-neighbouring candidates share most of their blockers, and most blocked candidates end there. The fingers' box is
-symmetric under a half turn, so rolls k and k + R/2 share their work (R even).
+Speed: the points live in two bounding-volume hierarchies (balanced binary trees; per node an oriented box, an
+axis-aligned box and a ball): the palm's splits each node along its principal axis, the fingers' also along
+(position, normal) where that gives thinner children, so that its nodes are surface patches that do not straddle
+an edge of the part (the fingers' slab test is as tight as a node is thin). A node is skipped when it misses
+every region's slab along the closing axis, its radial band around the axis, or (for the palm, and for the
+fingers once few rolls are open) the region at every open roll: the ball first, for all rolls at once, then (the
+palm only) both boxes projected onto the roll's axes and the node's own axes. A node wholly inside a region at
+a roll blocks that roll at once. Before any traversal, remembered blockers are tried: a memo per thread keyed by
+the grid cell of each contact (fingers) and of the palm's centre at each open roll (palm), and a small per-thread
+cache; neighbouring candidates share most of their blockers, and most blocked candidates end there. The fingers'
+box is symmetric under a half turn, so rolls k and k + R/2 share their work (R even).
 """
 
 from __future__ import annotations
@@ -56,6 +58,13 @@ _STATS = 8  # counters per chunk: see free_rolls_stats
 _MEMO_SLOTS = 2  # blockers remembered per memo cell
 _MEMO_CELLS = 1 << 20  # at most this many memo cells
 _MEMO_H = 4.0  # memo cell width over the mean leaf patch (half extents along its two longer axes, summed)
+# the fingers' tree: a node may split along (position, weight x rms radius x normal) when its children's ball
+# radius + thickness x thinnest half extent is lower than by position alone. Work counts (deterministic) of a
+# sweep on the ring, tless_04 and a cylinder: weight 3 and thickness 2 were best or within 3 % of the best on
+# all three (ring finger nodes 24.9 -> 11.0 and points 33.8 -> 11.0 per candidate); thickness 1 or less lost
+# the ring's gain, weight 2 or 5 and thickness 3 were close
+_SPLIT_NORMAL_WEIGHT = 3.0
+_SPLIT_THICKNESS = 2.0
 
 
 @dataclass(frozen=True)
@@ -124,10 +133,44 @@ def _regions(model: CollisionModel) -> np.ndarray:
 
 
 @njit(cache=True)
-def _build_tree(P, leaves, pad):
+def _split_cost(Q, order, a, b, thick):
+    """Cost of a child holding the points Q[order[a:b]]: the radius of the ball around its oriented box plus
+    `thick` times the box's thinnest half extent (the fingers' slab test is as tight as a node is thin)."""
+    cnt = b - a
+    mean = np.zeros(3)
+    for u in range(a, b):
+        for c in range(3):
+            mean[c] += Q[order[u], c]
+    mean /= cnt
+    cov = np.zeros((3, 3))
+    for u in range(a, b):
+        for c in range(3):
+            for d in range(3):
+                cov[c, d] += (Q[order[u], c] - mean[c]) * (Q[order[u], d] - mean[d])
+    _, V = np.linalg.eigh(cov)
+    r2 = 0.0
+    thin = np.inf
+    for i in range(3):
+        lo, hi = np.inf, -np.inf
+        for u in range(a, b):
+            q = order[u]
+            pr = (Q[q, 0] - mean[0]) * V[0, i] + (Q[q, 1] - mean[1]) * V[1, i] + (Q[q, 2] - mean[2]) * V[2, i]
+            lo = min(lo, pr)
+            hi = max(hi, pr)
+        h = 0.5 * (hi - lo)
+        r2 += h * h
+        thin = min(thin, h)
+    return np.sqrt(r2) + thick * thin
+
+
+@njit(cache=True)
+def _build_tree(P, N, leaves, pad, weight, thick):
     """Balanced implicit binary tree over a permutation of the points: node 1 is the root, children 2k and 2k+1,
     leaves from `leaves` on. Node k at depth d (t = k - 2^d) holds the points [t n >> d, (t + 1) n >> d) of the
-    permuted order; each inner node splits its points at the median along their principal axis.
+    permuted order; each inner node splits its points at the median along their principal axis or, given the
+    points' normals N (else N has no rows), along the principal axis of (position, `weight` x the node's rms
+    radius x normal), whichever gives the children of lower _split_cost: the second parts a part's faces at
+    its edges, so that nodes are thin patches.
 
     Returns (perm, nodes): nodes (2 leaves, _NODE) = oriented box (centre xyz, three unit axes as rows, half
     extents), the radius of the ball around that centre that holds the node's points, and the axis-aligned box
@@ -135,11 +178,15 @@ def _build_tree(P, leaves, pad):
     one the corners and edges of parts modelled along their axes; the tests use both.
     """
     n = P.shape[0]
+    with_normals = N.shape[0] == n
     Q = P.copy()
+    Nq = N.copy()
     perm = np.arange(n)
     nodes = np.zeros((2 * leaves, _NODE))
     depth = 0
     cov = np.zeros((3, 3))
+    cov6 = np.zeros((6, 6))
+    v6 = np.empty(6)
     for node in range(1, 2 * leaves):
         if node >= (1 << (depth + 1)):
             depth += 1
@@ -189,13 +236,43 @@ def _build_tree(P, leaves, pad):
                 a_hi = max(a_hi, Q[p, a])
             nodes[node, 16 + a] = 0.5 * (a_lo + a_hi)
             nodes[node, 19 + a] = 0.5 * (a_hi - a_lo) + pad
-        if node < leaves:
-            key = np.empty(cnt)
+        if node >= leaves:
+            continue
+        key = np.empty(cnt)
+        for p in range(s, e):
+            key[p - s] = Q[p, 0] * ax[0, 0] + Q[p, 1] * ax[0, 1] + Q[p, 2] * ax[0, 2]
+        o = np.argsort(key, kind="mergesort")
+        if with_normals:
+            nm = np.zeros(3)
             for p in range(s, e):
-                key[p - s] = Q[p, 0] * ax[0, 0] + Q[p, 1] * ax[0, 1] + Q[p, 2] * ax[0, 2]
-            o = np.argsort(key, kind="mergesort")
-            Q[s:e] = Q[s:e][o]
-            perm[s:e] = perm[s:e][o]
+                for a in range(3):
+                    nm[a] += Nq[p, a]
+            nm /= cnt
+            sc = weight * np.sqrt((cov[0, 0] + cov[1, 1] + cov[2, 2]) / cnt)
+            cov6[:, :] = 0.0
+            for p in range(s, e):
+                for a in range(3):
+                    v6[a] = Q[p, a] - mean[a]
+                    v6[3 + a] = sc * (Nq[p, a] - nm[a])
+                for a in range(6):
+                    for b in range(6):
+                        cov6[a, b] += v6[a] * v6[b]
+            _, V6 = np.linalg.eigh(cov6)
+            for p in range(s, e):
+                kk = 0.0
+                for a in range(3):
+                    kk += (Q[p, a] - mean[a]) * V6[a, 5] + sc * (Nq[p, a] - nm[a]) * V6[3 + a, 5]
+                key[p - s] = kk
+            o6 = np.argsort(key, kind="mergesort")
+            # the children: [s, m) and [m, e) of the sorted order
+            m = (((2 * t + 1) * n) >> (depth + 1)) - s
+            Qs = Q[s:e]
+            by_pos = _split_cost(Qs, o, 0, m, thick) + _split_cost(Qs, o, m, cnt, thick)
+            if _split_cost(Qs, o6, 0, m, thick) + _split_cost(Qs, o6, m, cnt, thick) < by_pos:
+                o = o6
+            Nq[s:e] = Nq[s:e][o]
+        Q[s:e] = Q[s:e][o]
+        perm[s:e] = perm[s:e][o]
     return perm, nodes
 
 
@@ -345,9 +422,10 @@ def _probe(
     """Rolls within `target` blocked by regions r0..r1-1 (fingers: r0, r1 = 0, 2; palm: 2, 3) at the remembered
     blockers: the memo, then the thread's cache. Inlined: most candidates end here, without a call.
 
-    memo[0, cell] holds the points that last blocked a finger whose contact lies in that grid cell, memo[1, cell]
-    those that last blocked a palm whose centre lies in it (shared by the threads: racy hints, never trusted
-    without the exact test); cell0, cell1 are the cells of this candidate's contacts, -1 for none."""
+    memo[0, cell] holds the points (indices in the fingers' tree order) that last blocked a finger whose contact
+    lies in that grid cell, memo[1, cell] those (in the palm's tree order) that last blocked a palm whose centre
+    lies in it (hints, never trusted without the exact test); cell0, cell1 are the cells of this candidate's
+    contacts, -1 for none."""
     mask = np.uint64(0)
     slots = memo.shape[2]
     if finger:
@@ -646,10 +724,14 @@ def _free_rolls_kernel(
     P,
     pi,
     pj,
-    X,
-    Y,
-    Z,
-    nodes,
+    Xf,
+    Yf,
+    Zf,
+    nodes_f,
+    Xp,
+    Yp,
+    Zp,
+    nodes_p,
     leaves,
     reg,
     model_f,
@@ -713,9 +795,9 @@ def _free_rolls_kernel(
                 # each (one call in a loop over both measured 15-25 % slower)
                 blocked, cache_pos[0] = _probe(
                     F,
-                    X,
-                    Y,
-                    Z,
+                    Xf,
+                    Yf,
+                    Zf,
                     reg,
                     0,
                     2,
@@ -737,9 +819,9 @@ def _free_rolls_kernel(
                 if blocked != full and nr > 2:
                     more, cache_pos[1] = _probe(
                         F,
-                        X,
-                        Y,
-                        Z,
+                        Xp,
+                        Yp,
+                        Zp,
                         reg,
                         2,
                         nr,
@@ -762,10 +844,10 @@ def _free_rolls_kernel(
                 if blocked != full:
                     more, cache_pos[0] = _walk(
                         F,
-                        X,
-                        Y,
-                        Z,
-                        nodes,
+                        Xf,
+                        Yf,
+                        Zf,
+                        nodes_f,
                         leaves,
                         reg,
                         0,
@@ -790,10 +872,10 @@ def _free_rolls_kernel(
                 if blocked != full and nr > 2:
                     more, cache_pos[1] = _walk(
                         F,
-                        X,
-                        Y,
-                        Z,
-                        nodes,
+                        Xp,
+                        Yp,
+                        Zp,
+                        nodes_p,
                         leaves,
                         reg,
                         2,
@@ -827,14 +909,18 @@ _PREPARED_KEEP = 2
 _PREPARED_LOCK = threading.Lock()
 
 
-def _prepared(points, model, rolls):
-    """_prepare, reused while the same points (by content), model and roll count come back."""
+def _prepared(points, normals, model, rolls):
+    """_prepare, reused while the same points and normals (by content), model and roll count come back."""
     P = np.ascontiguousarray(points, dtype=np.float64)
-    key = (hashlib.blake2b(P.tobytes(), digest_size=16).digest(), P.shape, model, rolls)
+    N = _normals_or_none(normals, len(P))
+    h = hashlib.blake2b(P.tobytes(), digest_size=16)
+    if N is not None:
+        h.update(N.tobytes())
+    key = (h.digest(), P.shape, N is None, model, rolls)
     with _PREPARED_LOCK:
         got = _PREPARED.get(key)
     if got is None:
-        got = _prepare(P, model, rolls)
+        got = _prepare(P, N, model, rolls)
         with _PREPARED_LOCK:
             while len(_PREPARED) >= _PREPARED_KEEP:
                 _PREPARED.pop(next(iter(_PREPARED)))
@@ -842,8 +928,21 @@ def _prepared(points, model, rolls):
     return got
 
 
-def _prepare(points, model, rolls):
-    """Tree, region constants, roll tables and the blocker memo for one point set."""
+def _normals_or_none(normals, n):
+    """The points' normals as float64 (n, 3), or None: they only shape the fingers' tree, never the masks."""
+    if normals is None:
+        return None
+    N = np.ascontiguousarray(normals, dtype=np.float64)
+    if N.shape != (n, 3):
+        raise ValueError(f"normals must be ({n}, 3) like the points, got {N.shape}")
+    if not np.isfinite(N).all():
+        raise ValueError("normals must be finite")
+    return N
+
+
+def _prepare(points, normals, model, rolls):
+    """Trees, region constants, roll tables and the blocker memo for one point set (normals None: the fingers'
+    tree is split by position alone, as the palm's)."""
     from .transforms import roll_angles_rad
 
     P = np.ascontiguousarray(points, dtype=np.float64)
@@ -851,8 +950,16 @@ def _prepare(points, model, rolls):
     leaves = 1 << max(int(np.ceil(np.log2(max((n + _LEAF - 1) // _LEAF, 1)))), 0)
     span = float(np.max(P.max(axis=0) - P.min(axis=0))) if n else 0.0
     pad = 1e-9 * span + 1e-15
-    perm, nodes = _build_tree(P, leaves, pad)
+    no_normals = np.zeros((0, 3))
+    # the palm's tree by position alone: its node test likes compact nodes (palm nodes per candidate +12 % on
+    # the ring, +9 % on tless_04 in the fingers' tree)
+    perm, nodes = _build_tree(P, no_normals, leaves, pad, 0.0, 0.0)
+    if normals is None:
+        perm_f, nodes_f = perm, nodes
+    else:
+        perm_f, nodes_f = _build_tree(P, normals, leaves, pad, _SPLIT_NORMAL_WEIGHT, _SPLIT_THICKNESS)
     Ps = P[perm]
+    Pf = P[perm_f]
     psi = roll_angles_rad(rolls)
     cos_k, sin_k = np.cos(psi), np.sin(psi)
     half = rolls // 2 if rolls % 2 == 0 else 0
@@ -865,7 +972,13 @@ def _prepare(points, model, rolls):
         gfac = 2.0 * (2.0 * asym + 16.0 * np.finfo(np.float64).eps)
     full = np.uint64((1 << rolls) - 1) if rolls < 64 else np.uint64(0xFFFFFFFFFFFFFFFF)
     model_f = np.array([model.finger_thickness, model.stroke, model.min_width, model.clearance, model.inner_margin])
-    soa = tuple(np.ascontiguousarray(Ps[:, k]) for k in range(3))
+    # the fingers' points and tree, then the palm's (the same points in each tree's order)
+    soa = (
+        *(np.ascontiguousarray(Pf[:, k]) for k in range(3)),
+        nodes_f,
+        *(np.ascontiguousarray(Ps[:, k]) for k in range(3)),
+        nodes,
+    )
     # memo cells _MEMO_H leaf patches wide, at most _MEMO_CELLS of them
     lo = P.min(axis=0)
     ext = np.maximum(P.max(axis=0) - lo, 1e-12)
@@ -878,7 +991,7 @@ def _prepare(points, model, rolls):
     grid = np.array([lo[0], lo[1], lo[2], 1.0 / h, dims[0], dims[1], dims[2]], dtype=np.float64)
     # one memo per thread: shared cells that both threads keep rewriting cost more than the hits they share
     memo = np.full((numba.config.NUMBA_NUM_THREADS, 2, int(np.prod(dims)), _MEMO_SLOTS), -1, dtype=np.int64)
-    return soa, nodes, leaves, _regions(model), model_f, cos_k, sin_k, half, gfac, full, memo, grid
+    return soa, leaves, _regions(model), model_f, cos_k, sin_k, half, gfac, full, memo, grid
 
 
 def _run(points, normals, midpoints, axes, widths, inside, model, rolls, pairs=None):
@@ -892,7 +1005,7 @@ def _run(points, normals, midpoints, axes, widths, inside, model, rolls, pairs=N
     stats = np.zeros(((m + _CHUNK - 1) // _CHUNK, _STATS), dtype=np.int64)
     if m == 0 or len(points) == 0:
         return np.ones((m, rolls), dtype=bool), stats
-    soa, nodes, leaves, reg, model_f, cos_k, sin_k, half, gfac, full, memo, grid = _prepared(points, model, rolls)
+    soa, leaves, reg, model_f, cos_k, sin_k, half, gfac, full, memo, grid = _prepared(points, normals, model, rolls)
     out = np.empty((m, rolls), dtype=np.bool_)
     no_rows, no_index = np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
     if pairs is None:
@@ -913,7 +1026,6 @@ def _run(points, normals, midpoints, axes, widths, inside, model, rolls, pairs=N
             np.ascontiguousarray(inside, dtype=np.bool_),
             *index,
             *soa,
-            nodes,
             leaves,
             reg,
             model_f,
@@ -953,20 +1065,28 @@ def free_rolls(
 ) -> np.ndarray:
     """Collision-free rolls of each candidate: (m, rolls) bool.
 
-    points, normals: (n, 3) the sampled surface, metres, and its unit normals (unused by the exact test; kept
-    for the interface); midpoints (m, 3); axes (m, 3) unit, contact 0 -> 1;
+    points, normals: (n, 3) the sampled surface, metres, and its outward unit normals (they only shape the
+    fingers' tree, never the result; None: by position alone, slower on parts with edges); midpoints (m, 3);
+    axes (m, 3) unit, contact 0 -> 1;
     widths (m,) contact distances; inside (m,) bool. Roll k is the angle 2 pi k / rolls (CONTRACT.md).
     """
     return _run(points, normals, midpoints, axes, widths, inside, model, rolls)[0]
 
 
 def free_rolls_of_pairs(
-    points: np.ndarray, i: np.ndarray, j: np.ndarray, inside: np.ndarray, model: CollisionModel, rolls: int
+    points: np.ndarray,
+    i: np.ndarray,
+    j: np.ndarray,
+    inside: np.ndarray,
+    model: CollisionModel,
+    rolls: int,
+    normals: np.ndarray | None = None,
 ) -> np.ndarray:
     """free_rolls of the candidates (points[i], points[j]), contact 0 = points[i]: (m, rolls) bool, the same masks
     as free_rolls with midpoints 0.5 (p_i + p_j), axes d / |d| and widths |d| (d = p_j - p_i) made by numpy. The
-    kernel derives them per candidate, so no (m, 3) arrays are made (0.1 s of page faults at 1.6 M pairs)."""
-    return _run(points, None, None, None, None, inside, model, rolls, pairs=(i, j))[0]
+    kernel derives them per candidate, so no (m, 3) arrays are made (0.1 s of page faults at 1.6 M pairs).
+    normals: as for free_rolls."""
+    return _run(points, normals, None, None, None, inside, model, rolls, pairs=(i, j))[0]
 
 
 def free_rolls_stats(points, normals, midpoints, axes, widths, inside, model, rolls, pairs=None):

@@ -223,7 +223,7 @@ def _collide_in_blocks(plan, pts, nrm, spec: GripperSpec, params: Params, timing
         cuts = np.unique(np.r_[0, np.arange(-p0 % step, len(bi), step), len(bi)])
         for lo, hi in zip(cuts[:-1], cuts[1:], strict=True):
             sl = slice(int(lo), int(hi))
-            free[sl] = _collision.free_rolls_of_pairs(pts, bi[sl], bj[sl], bins[sl], model, params.rolls)
+            free[sl] = _collision.free_rolls_of_pairs(pts, bi[sl], bj[sl], bins[sl], model, params.rolls, normals=nrm)
             report("collision", (p0 + int(hi)) / m)
         keep = free.any(axis=1)
         n_kept += int(keep.sum())
