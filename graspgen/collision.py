@@ -17,10 +17,10 @@ far beyond rounding error, and every shortcut (a node wholly inside or outside a
 that every roll of a finger covers, the half-turn symmetry of the finger boxes) keeps a guard band and falls
 back to the per-roll test inside it.
 
-Speed: the points live in two bounding-volume hierarchies (balanced binary trees; per node an oriented box, an
-axis-aligned box and a ball): the palm's splits each node along its principal axis, the fingers' also along
-(position, normal) where that gives thinner children, so that its nodes are surface patches that do not straddle
-an edge of the part (the fingers' slab test is as tight as a node is thin). A node is skipped when it misses
+Speed: the points live in a bounding-volume hierarchy (a balanced binary tree; per node an oriented box, an
+axis-aligned box and a ball), each node split along its principal axis or, given the points' normals, along
+(position, normal) where that gives thinner children, so that nodes are surface patches that do not straddle an
+edge of the part (the fingers' slab test is as tight as a node is thin). A node is skipped when it misses
 every region's slab along the closing axis, its radial band around the axis, or (for the palm, and for the
 fingers once few rolls are open) the region at every open roll: the ball first, for all rolls at once, then (the
 palm only) both boxes projected onto the roll's axes and the node's own axes, against the palm cut to the node's
@@ -59,11 +59,12 @@ _STATS = 8  # counters per chunk: see free_rolls_stats
 _MEMO_SLOTS = 2  # blockers remembered per memo cell
 _MEMO_CELLS = 1 << 20  # at most this many memo cells
 _MEMO_H = 4.0  # memo cell width over the mean leaf patch (half extents along its two longer axes, summed)
-# the fingers' tree: a node may split along (position, weight x rms radius x normal) when its children's ball
+# the tree, given normals: a node splits along (position, weight x rms radius x normal) when its children's ball
 # radius + thickness x thinnest half extent is lower than by position alone. Work counts (deterministic) of a
 # sweep on the ring, tless_04 and a cylinder: weight 3 and thickness 2 were best or within 3 % of the best on
 # all three (ring finger nodes 24.9 -> 11.0 and points 33.8 -> 11.0 per candidate); thickness 1 or less lost
-# the ring's gain, weight 2 or 5 and thickness 3 were close
+# the ring's gain, weight 2 or 5 and thickness 3 were close. The palm's work in this tree is within a few per
+# cent of a tree by position alone (ring nodes +6 %, points -10 %; cylinder -3 %, -13 %)
 _SPLIT_NORMAL_WEIGHT = 3.0
 _SPLIT_THICKNESS = 2.0
 
@@ -423,10 +424,9 @@ def _probe(
     """Rolls within `target` blocked by regions r0..r1-1 (fingers: r0, r1 = 0, 2; palm: 2, 3) at the remembered
     blockers: the memo, then the thread's cache. Inlined: most candidates end here, without a call.
 
-    memo[0, cell] holds the points (indices in the fingers' tree order) that last blocked a finger whose contact
-    lies in that grid cell, memo[1, cell] those (in the palm's tree order) that last blocked a palm whose centre
-    lies in it (hints, never trusted without the exact test); cell0, cell1 are the cells of this candidate's
-    contacts, -1 for none."""
+    memo[0, cell] holds the points that last blocked a finger whose contact lies in that grid cell, memo[1, cell]
+    those that last blocked a palm whose centre lies in it (hints, never trusted without the exact test); cell0,
+    cell1 are the cells of this candidate's contacts, -1 for none."""
     mask = np.uint64(0)
     slots = memo.shape[2]
     if finger:
@@ -729,14 +729,10 @@ def _free_rolls_kernel(
     P,
     pi,
     pj,
-    Xf,
-    Yf,
-    Zf,
-    nodes_f,
-    Xp,
-    Yp,
-    Zp,
-    nodes_p,
+    X,
+    Y,
+    Z,
+    nodes,
     leaves,
     reg,
     model_f,
@@ -800,9 +796,9 @@ def _free_rolls_kernel(
                 # each (one call in a loop over both measured 15-25 % slower)
                 blocked, cache_pos[0] = _probe(
                     F,
-                    Xf,
-                    Yf,
-                    Zf,
+                    X,
+                    Y,
+                    Z,
                     reg,
                     0,
                     2,
@@ -824,9 +820,9 @@ def _free_rolls_kernel(
                 if blocked != full and nr > 2:
                     more, cache_pos[1] = _probe(
                         F,
-                        Xp,
-                        Yp,
-                        Zp,
+                        X,
+                        Y,
+                        Z,
                         reg,
                         2,
                         nr,
@@ -849,10 +845,10 @@ def _free_rolls_kernel(
                 if blocked != full:
                     more, cache_pos[0] = _walk(
                         F,
-                        Xf,
-                        Yf,
-                        Zf,
-                        nodes_f,
+                        X,
+                        Y,
+                        Z,
+                        nodes,
                         leaves,
                         reg,
                         0,
@@ -877,10 +873,10 @@ def _free_rolls_kernel(
                 if blocked != full and nr > 2:
                     more, cache_pos[1] = _walk(
                         F,
-                        Xp,
-                        Yp,
-                        Zp,
-                        nodes_p,
+                        X,
+                        Y,
+                        Z,
+                        nodes,
                         leaves,
                         reg,
                         2,
@@ -934,7 +930,7 @@ def _prepared(points, normals, model, rolls):
 
 
 def _normals_or_none(normals, n):
-    """The points' normals as float64 (n, 3), or None: they only shape the fingers' tree, never the masks."""
+    """The points' normals as float64 (n, 3), or None: they only shape the tree, never the masks."""
     if normals is None:
         return None
     N = np.ascontiguousarray(normals, dtype=np.float64)
@@ -946,8 +942,8 @@ def _normals_or_none(normals, n):
 
 
 def _prepare(points, normals, model, rolls):
-    """Trees, region constants, roll tables and the blocker memo for one point set (normals None: the fingers'
-    tree is split by position alone, as the palm's)."""
+    """Tree, region constants, roll tables and the blocker memo for one point set (normals None: the tree is
+    split by position alone)."""
     from .transforms import roll_angles_rad
 
     P = np.ascontiguousarray(points, dtype=np.float64)
@@ -955,16 +951,9 @@ def _prepare(points, normals, model, rolls):
     leaves = 1 << max(int(np.ceil(np.log2(max((n + _LEAF - 1) // _LEAF, 1)))), 0)
     span = float(np.max(P.max(axis=0) - P.min(axis=0))) if n else 0.0
     pad = 1e-9 * span + 1e-15
-    no_normals = np.zeros((0, 3))
-    # the palm's tree by position alone: its node test likes compact nodes (palm nodes per candidate +12 % on
-    # the ring, +9 % on tless_04 in the fingers' tree)
-    perm, nodes = _build_tree(P, no_normals, leaves, pad, 0.0, 0.0)
-    if normals is None:
-        perm_f, nodes_f = perm, nodes
-    else:
-        perm_f, nodes_f = _build_tree(P, normals, leaves, pad, _SPLIT_NORMAL_WEIGHT, _SPLIT_THICKNESS)
+    N = np.zeros((0, 3)) if normals is None else normals
+    perm, nodes = _build_tree(P, N, leaves, pad, _SPLIT_NORMAL_WEIGHT, _SPLIT_THICKNESS)
     Ps = P[perm]
-    Pf = P[perm_f]
     psi = roll_angles_rad(rolls)
     cos_k, sin_k = np.cos(psi), np.sin(psi)
     half = rolls // 2 if rolls % 2 == 0 else 0
@@ -977,13 +966,7 @@ def _prepare(points, normals, model, rolls):
         gfac = 2.0 * (2.0 * asym + 16.0 * np.finfo(np.float64).eps)
     full = np.uint64((1 << rolls) - 1) if rolls < 64 else np.uint64(0xFFFFFFFFFFFFFFFF)
     model_f = np.array([model.finger_thickness, model.stroke, model.min_width, model.clearance, model.inner_margin])
-    # the fingers' points and tree, then the palm's (the same points in each tree's order)
-    soa = (
-        *(np.ascontiguousarray(Pf[:, k]) for k in range(3)),
-        nodes_f,
-        *(np.ascontiguousarray(Ps[:, k]) for k in range(3)),
-        nodes,
-    )
+    soa = tuple(np.ascontiguousarray(Ps[:, k]) for k in range(3))
     # memo cells _MEMO_H leaf patches wide, at most _MEMO_CELLS of them
     lo = P.min(axis=0)
     ext = np.maximum(P.max(axis=0) - lo, 1e-12)
@@ -996,7 +979,7 @@ def _prepare(points, normals, model, rolls):
     grid = np.array([lo[0], lo[1], lo[2], 1.0 / h, dims[0], dims[1], dims[2]], dtype=np.float64)
     # one memo per thread: shared cells that both threads keep rewriting cost more than the hits they share
     memo = np.full((numba.config.NUMBA_NUM_THREADS, 2, int(np.prod(dims)), _MEMO_SLOTS), -1, dtype=np.int64)
-    return soa, leaves, _regions(model), model_f, cos_k, sin_k, half, gfac, full, memo, grid
+    return soa, nodes, leaves, _regions(model), model_f, cos_k, sin_k, half, gfac, full, memo, grid
 
 
 def _run(points, normals, midpoints, axes, widths, inside, model, rolls, pairs=None):
@@ -1010,7 +993,9 @@ def _run(points, normals, midpoints, axes, widths, inside, model, rolls, pairs=N
     stats = np.zeros(((m + _CHUNK - 1) // _CHUNK, _STATS), dtype=np.int64)
     if m == 0 or len(points) == 0:
         return np.ones((m, rolls), dtype=bool), stats
-    soa, leaves, reg, model_f, cos_k, sin_k, half, gfac, full, memo, grid = _prepared(points, normals, model, rolls)
+    soa, nodes, leaves, reg, model_f, cos_k, sin_k, half, gfac, full, memo, grid = _prepared(
+        points, normals, model, rolls
+    )
     out = np.empty((m, rolls), dtype=np.bool_)
     no_rows, no_index = np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
     if pairs is None:
@@ -1031,6 +1016,7 @@ def _run(points, normals, midpoints, axes, widths, inside, model, rolls, pairs=N
             np.ascontiguousarray(inside, dtype=np.bool_),
             *index,
             *soa,
+            nodes,
             leaves,
             reg,
             model_f,
@@ -1071,7 +1057,7 @@ def free_rolls(
     """Collision-free rolls of each candidate: (m, rolls) bool.
 
     points, normals: (n, 3) the sampled surface, metres, and its outward unit normals (they only shape the
-    fingers' tree, never the result; None: by position alone, slower on parts with edges); midpoints (m, 3);
+    tree, never the result; None: by position alone, slower on parts with edges); midpoints (m, 3);
     axes (m, 3) unit, contact 0 -> 1;
     widths (m,) contact distances; inside (m,) bool. Roll k is the angle 2 pi k / rolls (CONTRACT.md).
     """

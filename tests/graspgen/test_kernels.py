@@ -365,9 +365,9 @@ def test_free_rolls_of_pairs_refuses_bad_indices():
         free_rolls_of_pairs(pts, np.array([0]), np.array([5, 7]), ok[2], model, 16)
 
 
-def test_normals_shape_the_fingers_tree_not_the_masks():
-    """With the points' normals the fingers' tree splits a part's faces apart at its edges: the same masks as
-    without normals and as the reference, for much less finger work on the ring (flat faces meeting at edges)."""
+def test_normals_shape_the_tree_not_the_masks():
+    """With the points' normals the tree splits a part's faces apart at its edges: the same masks as without
+    normals and as the reference, for much less finger work on the ring (flat faces meeting at edges)."""
     from graspgen.collision import free_rolls_stats
 
     pts, nrm = _sample(_parts()["ring"], 4000, seed=2)
@@ -391,8 +391,6 @@ def test_normals_shape_the_fingers_tree_not_the_masks():
     )
     finger = work_shaped["finger_nodes"] + work_shaped["finger_points"]
     assert finger < 0.7 * (work_plain["finger_nodes"] + work_plain["finger_points"])
-    # the palm keeps its tree by position alone (its counts vary a little with the blockers its cache holds)
-    assert abs(work_shaped["palm_nodes"] - work_plain["palm_nodes"]) < 0.01 * work_plain["palm_nodes"]
 
 
 def test_free_rolls_refuses_bad_normals():
