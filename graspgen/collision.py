@@ -25,10 +25,10 @@ every region's slab along the closing axis, its radial band around the axis, or 
 fingers once few rolls are open) the region at every open roll: the ball first, for all rolls at once, then (the
 palm only) both boxes projected onto the roll's axes and the node's own axes, against the palm cut to the node's
 own slab along the closing axis (all its points lie there). A node wholly inside a region at a roll blocks that
-roll at once. Before any traversal, remembered blockers are tried: a memo per thread keyed by
-the grid cell of each contact (fingers) and of the palm's centre at each open roll (palm), and a small per-thread
-cache; neighbouring candidates share most of their blockers, and most blocked candidates end there. The fingers'
-box is symmetric under a half turn, so rolls k and k + R/2 share their work (R even).
+roll at once. Before any traversal, remembered blockers are tried: a memo per thread keyed by the grid cell of
+each contact (fingers) and of the palm's centre at each open roll (palm), and a small per-thread cache;
+neighbouring candidates share most of their blockers, and most blocked candidates end there. The fingers' box is
+symmetric under a half turn, so rolls k and k + R/2 share their work (R even).
 """
 
 from __future__ import annotations
