@@ -135,9 +135,9 @@ def _regions(model: CollisionModel) -> np.ndarray:
 
 
 @njit(cache=True)
-def _split_cost(Q, order, a, b, thick):
-    """Cost of a child holding the points Q[order[a:b]]: the radius of the ball around its oriented box plus
-    `thick` times the box's thinnest half extent (the fingers' slab test is as tight as a node is thin)."""
+def _pca_box(Q, order, a, b):
+    """The oriented box of the points Q[order[a:b]]: (mean, covariance sum, axes as rows with the principal one
+    first, lower and upper bounds of the points along each axis, relative to the mean)."""
     cnt = b - a
     mean = np.zeros(3)
     for u in range(a, b):
@@ -146,20 +146,35 @@ def _split_cost(Q, order, a, b, thick):
     mean /= cnt
     cov = np.zeros((3, 3))
     for u in range(a, b):
+        q = order[u]
         for c in range(3):
             for d in range(3):
-                cov[c, d] += (Q[order[u], c] - mean[c]) * (Q[order[u], d] - mean[d])
+                cov[c, d] += (Q[q, c] - mean[c]) * (Q[q, d] - mean[d])
     _, V = np.linalg.eigh(cov)
+    ax = np.empty((3, 3))
+    for i in range(3):
+        for c in range(3):
+            ax[i, c] = V[c, 2 - i]  # principal axis first
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for u in range(a, b):
+        q = order[u]
+        for i in range(3):
+            pr = (Q[q, 0] - mean[0]) * ax[i, 0] + (Q[q, 1] - mean[1]) * ax[i, 1] + (Q[q, 2] - mean[2]) * ax[i, 2]
+            lo[i] = min(lo[i], pr)
+            hi[i] = max(hi[i], pr)
+    return mean, cov, ax, lo, hi
+
+
+@njit(cache=True)
+def _split_cost(Q, order, a, b, thick):
+    """Cost of a child holding the points Q[order[a:b]]: the radius of the ball around its oriented box plus
+    `thick` times the box's thinnest half extent (the fingers' slab test is as tight as a node is thin)."""
+    _, _, _, lo, hi = _pca_box(Q, order, a, b)
     r2 = 0.0
     thin = np.inf
-    for i in range(3):
-        lo, hi = np.inf, -np.inf
-        for u in range(a, b):
-            q = order[u]
-            pr = (Q[q, 0] - mean[0]) * V[0, i] + (Q[q, 1] - mean[1]) * V[1, i] + (Q[q, 2] - mean[2]) * V[2, i]
-            lo = min(lo, pr)
-            hi = max(hi, pr)
-        h = 0.5 * (hi - lo)
+    for i in range(2, -1, -1):
+        h = 0.5 * (hi[i] - lo[i])
         r2 += h * h
         thin = min(thin, h)
     return np.sqrt(r2) + thick * thin
@@ -184,9 +199,9 @@ def _build_tree(P, N, leaves, pad, weight, thick):
     Q = P.copy()
     Nq = N.copy()
     perm = np.arange(n)
+    ident = np.arange(n)  # _pca_box over Q[s:e] in place
     nodes = np.zeros((2 * leaves, _NODE))
     depth = 0
-    cov = np.zeros((3, 3))
     cov6 = np.zeros((6, 6))
     v6 = np.empty(6)
     for node in range(1, 2 * leaves):
@@ -196,28 +211,7 @@ def _build_tree(P, N, leaves, pad, weight, thick):
         s = (t * n) >> depth
         e = ((t + 1) * n) >> depth
         cnt = e - s
-        mean = np.zeros(3)
-        for p in range(s, e):
-            for a in range(3):
-                mean[a] += Q[p, a]
-        mean /= cnt
-        cov[:, :] = 0.0
-        for p in range(s, e):
-            for a in range(3):
-                for b in range(3):
-                    cov[a, b] += (Q[p, a] - mean[a]) * (Q[p, b] - mean[b])
-        _, V = np.linalg.eigh(cov)
-        ax = np.empty((3, 3))
-        for i in range(3):
-            for a in range(3):
-                ax[i, a] = V[a, 2 - i]  # principal axis first
-        lo = np.full(3, np.inf)
-        hi = np.full(3, -np.inf)
-        for p in range(s, e):
-            for i in range(3):
-                pr = (Q[p, 0] - mean[0]) * ax[i, 0] + (Q[p, 1] - mean[1]) * ax[i, 1] + (Q[p, 2] - mean[2]) * ax[i, 2]
-                lo[i] = min(lo[i], pr)
-                hi[i] = max(hi[i], pr)
+        mean, cov, ax, lo, hi = _pca_box(Q, ident, s, e)
         c = mean.copy()
         for i in range(3):
             for a in range(3):
