@@ -3,7 +3,7 @@
 
 With nothing configured, `serve` is the embedded default: a SQLite file and artifacts under GRASPGEN_STORAGE_DIR
 (./var/graspgen), the schema migrated on start, jobs run in-process by the same Celery task, and an admin token created
-on first start (printed once).
+on first start (written to admin-token beside the tokens file, mode 0600; the log shows only its path).
 """
 
 from __future__ import annotations
@@ -62,12 +62,10 @@ def _serve(args: argparse.Namespace) -> int:
     if settings.embedded_database:
         upgrade(settings)  # the SQLite file is ours: bring it to the current schema
     if settings.tokens_file is None:
-        token = bootstrap_tokens_file(settings.tokens_path)
-        if token is not None:
-            print(
-                f"graspgen: created admin token (shown once, hash stored in {settings.tokens_path}):\n{token}",
-                flush=True,
-            )
+        token_file = settings.tokens_path.with_name("admin-token")
+        if bootstrap_tokens_file(settings.tokens_path, token_file=token_file) is not None:
+            # never the token itself: container logs are read by more people than the data directory
+            print(f"graspgen: created admin token local-admin in {token_file} (mode 0600)", flush=True)
     elif not settings.tokens_file.is_file():
         print(f"graspgen: tokens file {settings.tokens_file} does not exist", file=sys.stderr)
         return 2

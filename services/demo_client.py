@@ -1,6 +1,6 @@
 """A scripted client for a running service: upload a part, register a gripper, run a job, read the result.
 
-    graspgen serve &                                     # prints an admin token on first start
+    graspgen serve &                                     # writes the admin token to var/graspgen/admin-token
     python -m services.demo_client --token ggt_... [--url http://127.0.0.1:8000] [--part PATH --units mm]
 
 Without --part it uploads a 40 x 30 x 20 mm box made with trimesh. Exit status 0 when the job succeeded.

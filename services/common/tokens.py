@@ -15,7 +15,15 @@ import threading
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["Principal", "TokenStore", "TokensFileError", "SCOPES", "hash_token", "bootstrap_tokens_file"]
+__all__ = [
+    "Principal",
+    "TokenStore",
+    "TokensFileError",
+    "SCOPES",
+    "hash_token",
+    "bootstrap_tokens_file",
+    "write_private_file",
+]
 
 SCOPES = ("read", "write", "admin")
 _RANK = {s: i for i, s in enumerate(SCOPES)}
@@ -102,8 +110,13 @@ class TokenStore:
         return found
 
 
-def bootstrap_tokens_file(path: Path, *, name: str = "local-admin") -> str | None:
-    """Create `path` with one admin token and return the token, or return None when the file exists already."""
+def bootstrap_tokens_file(path: Path, *, name: str = "local-admin", token_file: Path | None = None) -> str | None:
+    """Create `path` with one admin token and return the token, or return None when the file exists already.
+
+    With `token_file`, the token itself is also written there, readable only by its owner (mode 0600), so that it
+    never has to appear in a log; it is written before the tokens file gets its content, so a crash in between
+    leaves no token without a copy.
+    """
     path.parent.mkdir(parents=True, exist_ok=True)
     token = "ggt_" + secrets.token_urlsafe(32)
     doc = {"tokens": [{"name": name, "sha256": hash_token(token), "scopes": ["admin"]}]}
@@ -112,6 +125,25 @@ def bootstrap_tokens_file(path: Path, *, name: str = "local-admin") -> str | Non
     except FileExistsError:
         return None
     with os.fdopen(fd, "w", encoding="utf-8") as f:
+        if token_file is not None:
+            write_private_file(token_file, token + "\n")
         json.dump(doc, f, indent=2)
         f.write("\n")
     return token
+
+
+def write_private_file(path: Path, text: str) -> None:
+    """Write `text` to `path` atomically with mode 0600 (whatever the umask), replacing an older file."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    try:
+        os.fchmod(fd, 0o600)
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
