@@ -16,9 +16,11 @@ __all__ = ["GripperSpec", "Box", "SLUG_PATTERN"]
 SLUG_PATTERN = re.compile(r"^[a-z0-9][a-z0-9._-]{0,62}$")
 
 _REQUIRED = ("name", "stroke", "finger_width", "finger_depth", "finger_thickness", "friction", "pregrasp_clearance")
-_OPTIONAL = ("min_width", "palm_depth", "palm_width")
+_OPTIONAL = ("min_width", "palm_depth", "palm_width", "grip_force")
 #: a gripper larger than this in any dimension is almost certainly given in millimetres
 _MAX_LENGTH = 2.0
+#: newtons per finger; industrial parallel grippers stay well below this
+_MAX_FORCE = 100_000.0
 
 
 @dataclass(frozen=True)
@@ -41,6 +43,8 @@ class GripperSpec:
     min_width: float = 0.0
     palm_depth: float = 0.0
     palm_width: float | None = None
+    #: force each finger presses with (N); criterion (e) and the physics validation need it
+    grip_force: float | None = None
 
     def __post_init__(self) -> None:
         if self.palm_width is None:
@@ -53,6 +57,12 @@ class GripperSpec:
             _check_number(field, getattr(self, field), positive=True)
         for field in ("min_width", "palm_depth", "pregrasp_clearance"):
             _check_number(field, getattr(self, field), positive=False)
+        if self.grip_force is not None:
+            _check_number("grip_force", self.grip_force, positive=True)
+            if self.grip_force > _MAX_FORCE:
+                raise InvalidGripperError(
+                    f"grip_force = {self.grip_force} N is more than {_MAX_FORCE:g} N per finger", field="grip_force"
+                )
         for field in ("stroke", "finger_width", "finger_depth", "finger_thickness", "palm_width", "palm_depth"):
             if getattr(self, field) > _MAX_LENGTH:
                 raise InvalidGripperError(
@@ -91,7 +101,10 @@ class GripperSpec:
         return cls.from_dict(data)
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        d = asdict(self)
+        if d["grip_force"] is None:
+            del d["grip_force"]  # optional: a spec without it exports as before
+        return d
 
     def with_friction(self, friction: float | None) -> GripperSpec:
         if friction is None:

@@ -8,9 +8,13 @@ from typing import Any
 
 from .errors import InvalidParameterError
 
-__all__ = ["Params", "Tolerances", "TOLERANCES", "COLLISION_MODES"]
+__all__ = ["Params", "Tolerances", "TOLERANCES", "COLLISION_MODES", "HOLD_MODES", "STANDARD_GRAVITY"]
 
 COLLISION_MODES = ("swept", "paper")
+#: criterion (e): "any" keeps candidates that hold the part against its load in every direction; "off" skips it
+HOLD_MODES = ("any", "off")
+#: m/s^2
+STANDARD_GRAVITY = 9.81
 
 
 @dataclass(frozen=True)
@@ -40,6 +44,14 @@ class Params:
     inside: bool = False
     collision: str = "swept"
     seed: int = 0
+    #: the part's mass (kg), or its density (kg/m^3) times the mesh volume; criterion (e) needs one of them
+    mass_kg: float | None = None
+    density: float | None = None
+    #: acceleration (m/s^2) on top of gravity that a held part must resist in every direction
+    accel: float = STANDARD_GRAVITY
+    hold: str = "any"
+    #: criterion (c) holds for every surface normal within this distance (m) of each contact
+    position_tolerance: float = 1.0e-3
 
     def __post_init__(self) -> None:
         _int(self, "points", 100, 1_000_000)
@@ -52,6 +64,16 @@ class Params:
         _num(self, "safety_factor", lo=1.0, hi=100.0)
         if not isinstance(self.inside, bool):
             raise InvalidParameterError(f"inside must be true or false, got {self.inside!r}", field="inside")
+        if self.mass_kg is not None:
+            _num(self, "mass_kg", lo=0.0, lo_open=True, hi=100_000.0)
+        if self.density is not None:
+            _num(self, "density", lo=1.0, hi=100_000.0)
+        if self.mass_kg is not None and self.density is not None:
+            raise InvalidParameterError("give mass_kg or density, not both", field="density")
+        _num(self, "accel", lo=0.0, hi=1_000.0)
+        _num(self, "position_tolerance", lo=0.0, hi=0.05)
+        if self.hold not in HOLD_MODES:
+            raise InvalidParameterError(f"hold must be one of {', '.join(HOLD_MODES)}, got {self.hold!r}", field="hold")
         if self.collision not in COLLISION_MODES:
             raise InvalidParameterError(
                 f"collision must be one of {', '.join(COLLISION_MODES)}, got {self.collision!r}", field="collision"
