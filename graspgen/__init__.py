@@ -16,11 +16,14 @@ from .export import Candidates, GraspSet, load_candidates
 from .gripper import GripperSpec
 from .params import Params
 from .parts import Part, load_part
+from .pick import PickResult, pick
 from .pipeline import generate, recluster
 
 __all__ = [
     "generate",
     "recluster",
+    "pick",
+    "PickResult",
     "GraspSet",
     "Candidates",
     "load_candidates",

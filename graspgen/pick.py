@@ -1,0 +1,378 @@
+"""The pick query (CONTRACT.md, "Pick query"): world-frame grasps of a candidate set that fit a scene.
+
+Every candidate of the set at every free roll is one *pair*. A query keeps the pairs whose approach axis (the grasp's
++Z in the world) lies within `approach.max_angle_deg` of `approach.direction`, and whose fingers and palm at the
+grasp, and open fingers and palm at the pre-grasp (the grasp retreated `pregrasp_distance` along its -Z), lie on the
+normal side of every plane. The survivors come best first in the set's quality order:
+
+- `score`: the quality score (graspgen.quality.scores of the NPZ's `quality_terms`) when the set has quality terms,
+  else the friction margin in degrees; higher is better;
+- ties by the smaller approach angle, then the smaller candidate index, then the smaller roll index.
+
+`T_world_grasp = T_world_object @ T_object_grasp(candidate, roll)`, with the contract's grasp frame and roll basis
+(graspgen.transforms). `PickIndex` holds the pairs' object-frame axes once per set, so that a query is one small
+matrix product and a few vector operations over all pairs: a box lies on the normal side of a plane exactly when its
+lowest corner does, and the lowest corner's height is the centre's height minus the half extents weighted by |m|,
+where m is the plane normal in the grasp frame.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .errors import InvalidParameterError
+from .export import Candidates, GraspSet
+from .gripper import GripperSpec
+from .transforms import matrix_to_quaternion_xyzw, roll_basis
+
+__all__ = [
+    "pick",
+    "PickIndex",
+    "PickResult",
+    "validate_pose",
+    "DEFAULT_LIMIT",
+    "MAX_LIMIT",
+    "MAX_PLANES",
+    "DEFAULT_PREGRASP_DISTANCE",
+    "POSE_TOLERANCE",
+    "PLANE_TOLERANCE",
+]
+
+DEFAULT_LIMIT = 10
+MAX_LIMIT = 1000
+MAX_PLANES = 64
+#: metres the pre-grasp lies behind the grasp, along the grasp's -Z
+DEFAULT_PREGRASP_DISTANCE = 0.05
+#: a pose's rotation must be orthonormal with det +1 and its last row 0 0 0 1 within this
+POSE_TOLERANCE = 1e-6
+#: metres a box corner may lie on the wrong side of a plane and still count as on it (rounding, not clearance)
+PLANE_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True, eq=False)
+class PickIndex:
+    """Every (candidate, free roll) pair of a candidate set, in the set's quality order (object frame).
+
+    `frames` (k, 12) holds each pair's grasp axes X, Y, Z and origin P (object frame, metres) side by side, so that
+    one product `frames @ M` gives every dot product a query needs.
+    """
+
+    gripper: GripperSpec
+    candidate: np.ndarray  # (k,) int64, index into the candidate NPZ
+    roll_index: np.ndarray  # (k,) int16, index into roll_angles_rad
+    roll_angles_rad: np.ndarray  # (R,)
+    frames: np.ndarray  # (k, 12) float64
+    width: np.ndarray  # (k,) contact distance, metres
+    score: np.ndarray  # (k,) non-increasing
+    labels: np.ndarray  # (n, 2) int32 per candidate
+    medoid: np.ndarray  # (n,) bool per candidate: an exported representative
+    friction_margin_deg: np.ndarray  # (n,)
+    hold_margin: np.ndarray | None  # (n,) when the set has one
+    score_source: str  # "quality" | "friction_margin_deg"
+    candidates_total: int
+
+    @classmethod
+    def build(cls, candidates: Candidates, gripper: GripperSpec) -> PickIndex:
+        ci, ri = np.nonzero(np.asarray(candidates.free_rolls, dtype=bool))
+        if candidates.quality_terms is not None:
+            from .quality import scores
+
+            per_candidate = scores(candidates.quality_terms)
+            source = "quality"
+        else:
+            per_candidate = np.asarray(candidates.friction_margin_deg, dtype=np.float64)
+            source = "friction_margin_deg"
+        score = per_candidate[ci]
+        order = np.lexsort((ri, ci, -score))
+        ci, ri, score = ci[order].astype(np.int64), ri[order].astype(np.int16), score[order]
+        axes = candidates.axes
+        y0, z0 = roll_basis(axes)  # per candidate; the pairs combine them with their roll
+        psi = np.asarray(candidates.roll_angles_rad, dtype=np.float64)[ri][:, None]
+        c, s = np.cos(psi), np.sin(psi)
+        frames = np.empty((len(ci), 12), dtype=np.float64)
+        frames[:, 0:3] = axes[ci]
+        frames[:, 3:6] = c * y0[ci] + s * z0[ci]
+        frames[:, 6:9] = -s * y0[ci] + c * z0[ci]
+        frames[:, 9:12] = candidates.midpoints[ci]
+        n = len(candidates)
+        medoid = np.zeros(n, dtype=bool)
+        medoid[np.asarray(candidates.medoids, dtype=np.int64)] = True
+        hold = getattr(candidates, "hold_margin", None)
+        return cls(
+            gripper=gripper,
+            candidate=ci,
+            roll_index=ri,
+            roll_angles_rad=np.asarray(candidates.roll_angles_rad, dtype=np.float64),
+            frames=frames,
+            width=candidates.widths[ci],
+            score=score,
+            labels=np.asarray(candidates.labels, dtype=np.int32),
+            medoid=medoid,
+            friction_margin_deg=np.asarray(candidates.friction_margin_deg, dtype=np.float64),
+            hold_margin=None if hold is None else np.asarray(hold, dtype=np.float64),
+            score_source=source,
+            candidates_total=n,
+        )
+
+    def __len__(self) -> int:
+        return len(self.candidate)
+
+    @property
+    def nbytes(self) -> int:
+        arrays = (self.candidate, self.roll_index, self.frames, self.width, self.score, self.labels, self.medoid)
+        extra = 0 if self.hold_margin is None else self.hold_margin.nbytes
+        return sum(a.nbytes for a in arrays) + self.friction_margin_deg.nbytes + extra + 1024
+
+
+@dataclass(frozen=True)
+class PickResult:
+    considered: int  # (candidate, free roll) pairs of the set
+    feasible: int  # pairs that pass the cone and every plane
+    grasps: list[dict[str, Any]]  # up to `limit`, best first
+    removed: dict[str, Any]  # {"approach": n, "planes": n, "per_plane": [...]}
+    score_source: str
+
+    @property
+    def reason(self) -> dict[str, Any] | None:
+        """Why nothing came back: how many pairs each filter removed (None when grasps were found)."""
+        if self.grasps:
+            return None
+        return {"candidates": self.considered, **self.removed}
+
+    def to_json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "considered": self.considered,
+            "feasible": self.feasible,
+            "score": self.score_source,
+            "removed": self.removed,
+            "grasps": self.grasps,
+        }
+        if not self.grasps:
+            out["reason"] = self.reason
+        return out
+
+
+# -- validation ------------------------------------------------------------------------------------------------------
+def validate_pose(value: Any, field: str) -> np.ndarray:
+    """A 4x4 homogeneous pose: finite, rotation orthonormal with det +1, last row 0 0 0 1 (within POSE_TOLERANCE)."""
+    try:
+        T = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidParameterError(f"{field} must be a 4x4 matrix of numbers", field=field) from None
+    if T.shape != (4, 4):
+        raise InvalidParameterError(f"{field} must be a 4x4 matrix, got shape {T.shape}", field=field)
+    if not np.all(np.isfinite(T)):
+        raise InvalidParameterError(f"{field} holds non-finite numbers", field=field)
+    if np.max(np.abs(T[3] - (0.0, 0.0, 0.0, 1.0))) > POSE_TOLERANCE:
+        raise InvalidParameterError(f"{field}'s last row must be [0, 0, 0, 1]", field=field)
+    R = T[:3, :3]
+    if np.max(np.abs(R.T @ R - np.eye(3))) > POSE_TOLERANCE or abs(np.linalg.det(R) - 1.0) > POSE_TOLERANCE:
+        raise InvalidParameterError(
+            f"{field}'s rotation must be orthonormal with determinant +1 (within {POSE_TOLERANCE})", field=field
+        )
+    return T
+
+
+def _vector(value: Any, field: str, *, unit: bool) -> np.ndarray:
+    try:
+        v = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidParameterError(f"{field} must be 3 numbers", field=field) from None
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise InvalidParameterError(f"{field} must be 3 finite numbers", field=field)
+    if unit:
+        norm = float(np.linalg.norm(v))
+        if norm < 1e-12:
+            raise InvalidParameterError(f"{field} must not be the zero vector", field=field)
+        v = v / norm
+    return v
+
+
+def _number(value: Any, field: str, lo: float, hi: float) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise InvalidParameterError(f"{field} must be a finite number, got {value!r}", field=field)
+    if not lo <= value <= hi:
+        raise InvalidParameterError(f"{field} must be between {lo} and {hi}, got {value}", field=field)
+    return float(value)
+
+
+def _mapping(value: Any, field: str, keys: Sequence[str], required: Sequence[str]) -> Mapping[str, Any]:
+    if not isinstance(value, Mapping):
+        raise InvalidParameterError(f"{field} must be an object with {', '.join(keys)}", field=field)
+    unknown = sorted(set(value) - set(keys))
+    if unknown:
+        raise InvalidParameterError(f"{field} has unknown fields {', '.join(unknown)}", field=f"{field}.{unknown[0]}")
+    missing = [k for k in required if value.get(k) is None]
+    if missing:
+        raise InvalidParameterError(f"{field} lacks {', '.join(missing)}", field=f"{field}.{missing[0]}")
+    return value
+
+
+# -- the query -------------------------------------------------------------------------------------------------------
+def pick(
+    grasp_set_or_candidates: GraspSet | Candidates | PickIndex,
+    T_world_object: Any,
+    *,
+    approach: Mapping[str, Any] | None = None,
+    planes: Sequence[Mapping[str, Any]] | None = None,
+    pregrasp_distance: float = DEFAULT_PREGRASP_DISTANCE,
+    T_tcp_flange: Any = None,
+    limit: int = DEFAULT_LIMIT,
+    gripper: GripperSpec | None = None,
+) -> PickResult:
+    """World-frame grasps of a set that fit the scene, best first (module docstring, CONTRACT.md).
+
+    `T_world_object` (4, 4): where the part lies. `approach`: `{"direction": (3,), "max_angle_deg": float}`, the
+    grasp's +Z in the world must lie within the cone (None: any direction). `planes`: `[{"point": (3,), "normal":
+    (3,)}]` in the world frame, metres; fingers and palm at the grasp and at the pre-grasp stay on the normal side.
+    `T_tcp_flange` (4, 4): the flange relative to the TCP (grasp frame); adds `T_world_flange` and
+    `T_world_preflange`. A `Candidates` source needs `gripper`; a `GraspSet` carries its own.
+    """
+    T_wo = validate_pose(T_world_object, "T_world_object")
+    T_tf = None if T_tcp_flange is None else validate_pose(T_tcp_flange, "T_tcp_flange")
+    if isinstance(limit, bool) or not isinstance(limit, int) or not 1 <= limit <= MAX_LIMIT:
+        raise InvalidParameterError(f"limit must be an integer between 1 and {MAX_LIMIT}, got {limit!r}", field="limit")
+    distance = _number(pregrasp_distance, "pregrasp_distance", 0.0, 2.0)
+    direction, cos_max = None, -1.0
+    if approach is not None:
+        a = _mapping(approach, "approach", ("direction", "max_angle_deg"), ("direction", "max_angle_deg"))
+        direction = _vector(a["direction"], "approach.direction", unit=True)
+        cos_max = math.cos(math.radians(_number(a["max_angle_deg"], "approach.max_angle_deg", 0.0, 180.0)))
+    plane_list = list(planes or [])
+    if len(plane_list) > MAX_PLANES:
+        raise InvalidParameterError(f"at most {MAX_PLANES} planes, got {len(plane_list)}", field="planes")
+    normals, offsets = np.zeros((len(plane_list), 3)), np.zeros(len(plane_list))
+    for j, p in enumerate(plane_list):
+        p = _mapping(p, f"planes[{j}]", ("point", "normal"), ("point", "normal"))
+        normals[j] = _vector(p["normal"], f"planes[{j}].normal", unit=True)
+        offsets[j] = normals[j] @ _vector(p["point"], f"planes[{j}].point", unit=False)
+
+    index = _index_of(grasp_set_or_candidates, gripper)
+    R_wo, t_wo = T_wo[:3, :3], T_wo[:3, 3]
+    k = len(index)
+    ok, cos_z, removed = _filter(index, R_wo, t_wo, direction, cos_max, normals, offsets, distance)
+    chosen = _best(index, ok, cos_z, limit)
+    grasps = [_grasp_out(index, i, float(cos_z[i]), T_wo, distance, T_tf) for i in chosen]
+    return PickResult(
+        considered=k,
+        feasible=int(np.count_nonzero(ok)),
+        grasps=grasps,
+        removed=removed,
+        score_source=index.score_source,
+    )
+
+
+def _index_of(source: Any, gripper: GripperSpec | None) -> PickIndex:
+    if isinstance(source, PickIndex):
+        return source
+    if isinstance(source, GraspSet):
+        return PickIndex.build(source.candidates, gripper or source.gripper)
+    if isinstance(source, Candidates):
+        if gripper is None:
+            raise InvalidParameterError("picking from Candidates needs the gripper spec", field="gripper")
+        return PickIndex.build(source, gripper)
+    raise InvalidParameterError(f"cannot pick from a {type(source).__name__}", field="grasp_set")
+
+
+def _filter(
+    index: PickIndex,
+    R_wo: np.ndarray,
+    t_wo: np.ndarray,
+    direction: np.ndarray | None,
+    cos_max: float,
+    normals: np.ndarray,
+    offsets: np.ndarray,
+    distance: float,
+) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+    """Feasibility mask (k,), cos of the approach angle (k,) and how many pairs each filter removed."""
+    k, P = len(index), len(normals)
+    # object-frame query vectors: column 0 the approach direction, then per plane its normal in each of the 4 blocks
+    # (X, Y, Z, P), so (frames @ M) gives Z.d and per plane (X.n, Y.n, Z.n, P.n)
+    M = np.zeros((12, 1 + 4 * P))
+    if direction is not None:
+        M[6:9, 0] = R_wo.T @ direction
+    n_obj = normals @ R_wo  # (P, 3) = (R_wo^T n_j)
+    for j in range(P):
+        for b in range(4):
+            M[3 * b : 3 * b + 3, 1 + 4 * j + b] = n_obj[j]
+    G = index.frames @ M
+    cos_z = np.clip(G[:, 0], -1.0, 1.0) if direction is not None else np.ones(k)
+    ok = cos_z >= cos_max - 1e-12 if direction is not None else np.ones(k, dtype=bool)
+    removed_cone = k - int(np.count_nonzero(ok))
+    cone_ok = ok.copy()
+    g = index.gripper
+    ft, fw, fd = g.finger_thickness, g.finger_width, g.finger_depth
+    open_w = np.minimum(index.width + g.pregrasp_clearance, g.stroke)
+    per_plane = []
+    for j in range(P):
+        mx, my, mz, pn = (np.abs(G[:, 1 + 4 * j]), np.abs(G[:, 2 + 4 * j]), G[:, 3 + 4 * j], G[:, 4 + 4 * j])
+        amz = np.abs(mz)
+        h0 = pn + normals[j] @ t_wo - offsets[j]  # the grasp origin's height above the plane
+        # both fingers' lowest corner: -|mx| (w/2 + thickness) - |my| fw/2 - |mz| fd/2 below the origin
+        side = my * (fw / 2) + amz * (fd / 2)
+        lowest = np.minimum(h0 - mx * (index.width / 2 + ft), h0 - distance * mz - mx * (open_w / 2 + ft)) - side
+        if g.palm_depth > 0:
+            zc = -fd / 2 - g.palm_depth / 2
+            palm = mz * zc - mx * (g.stroke / 2 + ft) - my * (g.palm_width / 2) - amz * (g.palm_depth / 2)
+            lowest = np.minimum(lowest, np.minimum(h0, h0 - distance * mz) + palm)
+        inside = lowest >= -PLANE_TOLERANCE
+        per_plane.append(int(np.count_nonzero(cone_ok & ~inside)))
+        ok &= inside
+    removed = {"approach": removed_cone, "planes": int(np.count_nonzero(cone_ok & ~ok)), "per_plane": per_plane}
+    return ok, cos_z, removed
+
+
+def _best(index: PickIndex, ok: np.ndarray, cos_z: np.ndarray, limit: int) -> np.ndarray:
+    """Up to `limit` feasible pairs: by score (pairs are stored in score order), then approach angle, candidate,
+    roll. Only the feasible pairs scoring at least the limit-th one's score are sorted."""
+    idx = np.flatnonzero(ok)
+    if len(idx) > limit:
+        s = index.score[idx]
+        cut = s[limit - 1]
+        idx = idx[: int(np.searchsorted(-s, -cut, side="right"))]
+    order = np.lexsort((index.roll_index[idx], index.candidate[idx], -cos_z[idx], -index.score[idx]))
+    return idx[order[:limit]]
+
+
+def _matrix(T: np.ndarray) -> list[list[float]]:
+    return [[float(v) for v in row] for row in T]
+
+
+def _grasp_out(
+    index: PickIndex, i: int, cos_z: float, T_wo: np.ndarray, distance: float, T_tf: np.ndarray | None
+) -> dict[str, Any]:
+    f = index.frames[i]
+    T_og = np.eye(4)
+    T_og[:3, 0], T_og[:3, 1], T_og[:3, 2], T_og[:3, 3] = f[0:3], f[3:6], f[6:9], f[9:12]
+    T_wg = T_wo @ T_og
+    T_wp = T_wg.copy()
+    T_wp[:3, 3] -= distance * T_wg[:3, 2]
+    c = int(index.candidate[i])
+    width = float(index.width[i])
+    out: dict[str, Any] = {
+        "T_world_grasp": _matrix(T_wg),
+        "position": [float(v) for v in T_wg[:3, 3]],
+        "quaternion_xyzw": [float(v) for v in matrix_to_quaternion_xyzw(T_wg[:3, :3])],
+        "T_world_pregrasp": _matrix(T_wp),
+        "width": width,
+        "open_width": float(index.gripper.open_width(width)),
+        "roll_deg": float(np.degrees(index.roll_angles_rad[index.roll_index[i]])),
+        "roll_index": int(index.roll_index[i]),
+        "approach_angle_deg": float(np.degrees(np.arccos(np.clip(cos_z, -1.0, 1.0)))),
+        "candidate": c,
+        "cluster": [int(index.labels[c, 0]), int(index.labels[c, 1])],
+        "medoid": bool(index.medoid[c]),
+        "score": float(index.score[i]),
+        "friction_margin_deg": float(index.friction_margin_deg[c]),
+    }
+    if index.hold_margin is not None:
+        out["hold_margin"] = float(index.hold_margin[c])
+    if T_tf is not None:
+        out["T_world_flange"] = _matrix(T_wg @ T_tf)
+        out["T_world_preflange"] = _matrix(T_wp @ T_tf)
+    return out
