@@ -33,6 +33,7 @@ from .transforms import matrix_to_quaternion_xyzw, roll_basis
 __all__ = [
     "pick",
     "PickIndex",
+    "PickQuery",
     "PickResult",
     "validate_pose",
     "DEFAULT_LIMIT",
@@ -214,6 +215,79 @@ def _mapping(value: Any, field: str, keys: Sequence[str], required: Sequence[str
 
 
 # -- the query -------------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class PickQuery:
+    """A validated pick query (world frame, metres): what `pick` checks before it touches any candidate."""
+
+    T_world_object: np.ndarray  # (4, 4)
+    direction: np.ndarray | None  # (3,) unit, world frame; None: any approach
+    cos_max: float  # cos of approach.max_angle_deg
+    normals: np.ndarray  # (P, 3) unit, world frame
+    offsets: np.ndarray  # (P,) normal . point
+    pregrasp_distance: float
+    T_tcp_flange: np.ndarray | None
+    limit: int
+
+    @classmethod
+    def parse(
+        cls,
+        T_world_object: Any,
+        *,
+        approach: Mapping[str, Any] | None = None,
+        planes: Sequence[Mapping[str, Any]] | None = None,
+        pregrasp_distance: float = DEFAULT_PREGRASP_DISTANCE,
+        T_tcp_flange: Any = None,
+        limit: int = DEFAULT_LIMIT,
+    ) -> PickQuery:
+        T_wo = validate_pose(T_world_object, "T_world_object")
+        T_tf = None if T_tcp_flange is None else validate_pose(T_tcp_flange, "T_tcp_flange")
+        if isinstance(limit, bool) or not isinstance(limit, int) or not 1 <= limit <= MAX_LIMIT:
+            raise InvalidParameterError(
+                f"limit must be an integer between 1 and {MAX_LIMIT}, got {limit!r}", field="limit"
+            )
+        distance = _number(pregrasp_distance, "pregrasp_distance", 0.0, 2.0)
+        direction, cos_max = None, -1.0
+        if approach is not None:
+            a = _mapping(approach, "approach", ("direction", "max_angle_deg"), ("direction", "max_angle_deg"))
+            direction = _vector(a["direction"], "approach.direction", unit=True)
+            cos_max = math.cos(math.radians(_number(a["max_angle_deg"], "approach.max_angle_deg", 0.0, 180.0)))
+        if planes is not None and not isinstance(planes, Sequence):
+            raise InvalidParameterError("planes must be a list of {point, normal}", field="planes")
+        plane_list = list(planes or [])
+        if len(plane_list) > MAX_PLANES:
+            raise InvalidParameterError(f"at most {MAX_PLANES} planes, got {len(plane_list)}", field="planes")
+        normals, offsets = np.zeros((len(plane_list), 3)), np.zeros(len(plane_list))
+        for j, p in enumerate(plane_list):
+            p = _mapping(p, f"planes[{j}]", ("point", "normal"), ("point", "normal"))
+            normals[j] = _vector(p["normal"], f"planes[{j}].normal", unit=True)
+            offsets[j] = normals[j] @ _vector(p["point"], f"planes[{j}].point", unit=False)
+        return cls(T_wo, direction, cos_max, normals, offsets, distance, T_tf, limit)
+
+    def run(self, index: PickIndex) -> PickResult:
+        T_wo = self.T_world_object
+        ok, cos_z, removed = _filter(
+            index,
+            T_wo[:3, :3],
+            T_wo[:3, 3],
+            self.direction,
+            self.cos_max,
+            self.normals,
+            self.offsets,
+            self.pregrasp_distance,
+        )
+        chosen = _best(index, ok, cos_z, self.limit)
+        grasps = [
+            _grasp_out(index, i, float(cos_z[i]), T_wo, self.pregrasp_distance, self.T_tcp_flange) for i in chosen
+        ]
+        return PickResult(
+            considered=len(index),
+            feasible=int(np.count_nonzero(ok)),
+            grasps=grasps,
+            removed=removed,
+            score_source=index.score_source,
+        )
+
+
 def pick(
     grasp_set_or_candidates: GraspSet | Candidates | PickIndex,
     T_world_object: Any,
@@ -233,38 +307,15 @@ def pick(
     `T_tcp_flange` (4, 4): the flange relative to the TCP (grasp frame); adds `T_world_flange` and
     `T_world_preflange`. A `Candidates` source needs `gripper`; a `GraspSet` carries its own.
     """
-    T_wo = validate_pose(T_world_object, "T_world_object")
-    T_tf = None if T_tcp_flange is None else validate_pose(T_tcp_flange, "T_tcp_flange")
-    if isinstance(limit, bool) or not isinstance(limit, int) or not 1 <= limit <= MAX_LIMIT:
-        raise InvalidParameterError(f"limit must be an integer between 1 and {MAX_LIMIT}, got {limit!r}", field="limit")
-    distance = _number(pregrasp_distance, "pregrasp_distance", 0.0, 2.0)
-    direction, cos_max = None, -1.0
-    if approach is not None:
-        a = _mapping(approach, "approach", ("direction", "max_angle_deg"), ("direction", "max_angle_deg"))
-        direction = _vector(a["direction"], "approach.direction", unit=True)
-        cos_max = math.cos(math.radians(_number(a["max_angle_deg"], "approach.max_angle_deg", 0.0, 180.0)))
-    plane_list = list(planes or [])
-    if len(plane_list) > MAX_PLANES:
-        raise InvalidParameterError(f"at most {MAX_PLANES} planes, got {len(plane_list)}", field="planes")
-    normals, offsets = np.zeros((len(plane_list), 3)), np.zeros(len(plane_list))
-    for j, p in enumerate(plane_list):
-        p = _mapping(p, f"planes[{j}]", ("point", "normal"), ("point", "normal"))
-        normals[j] = _vector(p["normal"], f"planes[{j}].normal", unit=True)
-        offsets[j] = normals[j] @ _vector(p["point"], f"planes[{j}].point", unit=False)
-
-    index = _index_of(grasp_set_or_candidates, gripper)
-    R_wo, t_wo = T_wo[:3, :3], T_wo[:3, 3]
-    k = len(index)
-    ok, cos_z, removed = _filter(index, R_wo, t_wo, direction, cos_max, normals, offsets, distance)
-    chosen = _best(index, ok, cos_z, limit)
-    grasps = [_grasp_out(index, i, float(cos_z[i]), T_wo, distance, T_tf) for i in chosen]
-    return PickResult(
-        considered=k,
-        feasible=int(np.count_nonzero(ok)),
-        grasps=grasps,
-        removed=removed,
-        score_source=index.score_source,
+    query = PickQuery.parse(
+        T_world_object,
+        approach=approach,
+        planes=planes,
+        pregrasp_distance=pregrasp_distance,
+        T_tcp_flange=T_tcp_flange,
+        limit=limit,
     )
+    return query.run(_index_of(grasp_set_or_candidates, gripper))
 
 
 def _index_of(source: Any, gripper: GripperSpec | None) -> PickIndex:
