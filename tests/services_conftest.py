@@ -353,6 +353,7 @@ def seed_grasp_sets(
 
     from sqlalchemy import func, select
 
+    from services.common import catalogue
     from services.common.jobs import params_key
     from services.common.models import GraspSet, Gripper, GripperVersion, ObjectModel, ObjectVersion
 
@@ -400,5 +401,6 @@ def seed_grasp_sets(
                 s.add(gs)
                 s.flush()
                 ids.append(gs.id)
+            catalogue.refresh(s, object_id=obj.id, gripper_id=g.id)  # as the worker does when it stores a set
             out[name] = ids
     return out

@@ -55,6 +55,7 @@ class ObjectVersionOut(BaseModel):
     extents: list[float] = Field(description="bounding-box extents, metres")
     watertight: bool
     warnings: list[str]
+    mass_kg: float | None = Field(None, description="the part's mass in kg, if given at upload")
     created_at: datetime
     links: dict[str, str]
 
@@ -333,6 +334,58 @@ class GraspOut(BaseModel):
 
 class GraspPage(Page):
     items: list[GraspOut]
+
+
+# -- catalogue (releases, fleet sync) ---------------------------------------------------------------------------------
+class CatalogueItem(BaseModel):
+    """A grasp-set summary with its pair's state, or a pair that serves nothing now (`id` null, `withdrawn` true)."""
+
+    model_config = ConfigDict(extra="allow")
+    id: int | None
+    object: str
+    gripper: str
+    released: bool = Field(description="the current set is the pair's released set")
+    stale: bool = Field(description="released, but made for an older object or gripper version")
+    withdrawn: bool = Field(description="the pair serves nothing now: drop what you hold for it")
+    change_seq: int = Field(description="the change number of the pair's last change")
+    links: dict[str, str]
+
+
+class CataloguePage(Page):
+    gripper: str
+    items: list[CatalogueItem]
+    next_since: int = Field(description="send as ?since= next time; every change up to it is in this answer")
+
+
+class CatalogueEventOut(BaseModel):
+    grasp_set: int
+    version: int
+    action: Literal["release", "withdraw"]
+    at: datetime
+    by: str = Field(description="name of the token that did it")
+    replaced: int | None = Field(None, description="a release: the previously released set")
+    links: dict[str, str]
+
+
+class CatalogueHistoryPage(Page):
+    object: str
+    gripper: str
+    items: list[CatalogueEventOut]
+
+
+class CatalogueChange(BaseModel):
+    grasp_set: int
+    version: int
+    object: str
+    gripper: str
+    action: Literal["release", "withdraw"]
+    changed: bool = Field(description="false: it was already so; nothing was recorded")
+    event: CatalogueEventOut | None
+    current: int | None = Field(description="the set the catalogue serves for the pair now")
+    released: int | None = Field(description="the pair's released set now")
+    stale: bool
+    change_seq: int
+    links: dict[str, str]
 
 
 class Health(BaseModel):

@@ -4,6 +4,8 @@ objects 1-n object_versions      grippers 1-n gripper_versions
 jobs (generate | cluster | bulk; a bulk job is the parent of its items)
 grasp_sets: one immutable version per object version x gripper version x parameters, numbered per
             (object, gripper) pair; grasps: one row per exported grasp, so the catalogue is queryable without files.
+catalogue_pairs: what the catalogue serves for each (object, gripper) pair, kept by services/common/catalogue.py;
+catalogue_events: the releases and withdrawals (who, when); change_counter: the one row that numbers changes.
 """
 
 from __future__ import annotations
@@ -39,6 +41,9 @@ __all__ = [
     "Job",
     "GraspSet",
     "Grasp",
+    "CataloguePair",
+    "CatalogueEvent",
+    "ChangeCounter",
     "JOB_STATES",
     "TERMINAL_STATES",
     "JOB_KINDS",
@@ -122,6 +127,8 @@ class ObjectVersion(_Timestamps, Base):
     extents: Mapped[list[Any]]
     watertight: Mapped[bool] = mapped_column(Boolean)
     warnings: Mapped[list[Any]]
+    #: the part's mass in kg when the uploader gave it (a job without mass_kg or density uses it)
+    mass_kg: Mapped[float | None] = mapped_column(Float)
     #: storage key of the uploaded bytes (content-addressed)
     file_key: Mapped[str] = mapped_column(String(200))
 
@@ -157,6 +164,7 @@ class Job(_Timestamps, Base):
         UniqueConstraint("created_by", "idempotency_key"),
         Index(None, "parent_id", "item_index"),
         Index(None, "state", "created_at"),
+        Index(None, "created_by", "created_at"),
     )
 
     id: Mapped[uuid.UUID] = mapped_column(Uuid, primary_key=True, default=uuid.uuid4)
@@ -187,6 +195,8 @@ class Job(_Timestamps, Base):
     updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
     started_at: Mapped[datetime | None]
     finished_at: Mapped[datetime | None]
+    #: the X-Request-Id of the submitting request (issue 16)
+    request_id: Mapped[str | None] = mapped_column(String(64))
 
 
 class GraspSet(_Timestamps, Base):
@@ -219,6 +229,8 @@ class GraspSet(_Timestamps, Base):
     export_size: Mapped[int] = mapped_column(BigInteger)
     candidates_key: Mapped[str | None] = mapped_column(String(200))
     recording_key: Mapped[str | None] = mapped_column(String(200))
+    #: set when withdrawn: the catalogue never serves it again (unless it is released anew)
+    withdrawn_at: Mapped[datetime | None]
 
 
 class Grasp(Base):
@@ -239,3 +251,52 @@ class Grasp(Base):
     cluster_translation: Mapped[int]
     cluster_direction: Mapped[int]
     cluster_size: Mapped[int]
+
+
+class CataloguePair(Base):
+    """What `GET /v1/catalogue/{object}/{gripper}` serves, recomputed in the transaction of every change that can
+    alter it (a new grasp set, object version or gripper version; a release; a withdrawal)."""
+
+    __tablename__ = "catalogue_pairs"
+    __table_args__ = (Index(None, "gripper_id", "change_seq"),)
+
+    object_id: Mapped[int] = mapped_column(ForeignKey("objects.id", ondelete="CASCADE"), primary_key=True)
+    gripper_id: Mapped[int] = mapped_column(ForeignKey("grippers.id", ondelete="CASCADE"), primary_key=True)
+    #: the released set, if any (one per pair)
+    released_id: Mapped[int | None] = mapped_column(ForeignKey("grasp_sets.id"))
+    #: the set served now: the released one, else the newest for the newest object and gripper versions; None: none
+    current_id: Mapped[int | None] = mapped_column(ForeignKey("grasp_sets.id"))
+    #: the current set was made for an older object or gripper version (only a released set can be)
+    stale: Mapped[bool] = mapped_column(Boolean, default=False)
+    #: change_counter value of the last change of what this pair serves (fleet sync's `since`)
+    change_seq: Mapped[int] = mapped_column(BigInteger)
+    updated_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class CatalogueEvent(Base):
+    """One release or withdrawal: the history of a pair."""
+
+    __tablename__ = "catalogue_events"
+    __table_args__ = (Index(None, "object_id", "gripper_id", "id"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    object_id: Mapped[int] = mapped_column(ForeignKey("objects.id", ondelete="CASCADE"))
+    gripper_id: Mapped[int] = mapped_column(ForeignKey("grippers.id", ondelete="CASCADE"))
+    grasp_set_id: Mapped[int] = mapped_column(ForeignKey("grasp_sets.id", ondelete="CASCADE"))
+    #: "release" | "withdraw"
+    action: Mapped[str] = mapped_column(String(16))
+    at: Mapped[datetime] = mapped_column(default=utcnow)
+    #: name of the token (never the token)
+    by: Mapped[str] = mapped_column(String(100))
+    #: a release: the set it replaced as released, if any
+    replaced_id: Mapped[int | None] = mapped_column(ForeignKey("grasp_sets.id"))
+
+
+class ChangeCounter(Base):
+    """A single row (id 1): the last change sequence number handed out. Changes lock it until they commit, so
+    sequence numbers become visible in order (docs/SERVICE.md, fleet sync)."""
+
+    __tablename__ = "change_counter"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    value: Mapped[int] = mapped_column(BigInteger)

@@ -23,7 +23,7 @@ from sqlalchemy import func, insert, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from services.common import jobs
+from services.common import catalogue, jobs
 from services.common.db import Database, is_unavailable
 from services.common.models import (
     TERMINAL_STATES,
@@ -488,6 +488,7 @@ class JobRunner:
         s.flush()
         if grasps:
             s.execute(insert(Grasp), [_grasp_row(gs.id, rank, g) for rank, g in enumerate(grasps)])
+        catalogue.refresh(s, object_id=inp.object_id, gripper_id=inp.gripper_id)  # last: it locks the counter
         return gs.id
 
     def _end(self, jid: uuid.UUID, state: str, error: dict[str, Any] | None = None) -> str:

@@ -12,7 +12,17 @@ from typing import Any
 from sqlalchemy import Select, func, select
 from sqlalchemy.orm import Session
 
-from services.common.models import Grasp, GraspSet, Gripper, GripperVersion, ObjectModel, ObjectVersion
+from services.common import catalogue
+from services.common.models import (
+    CatalogueEvent,
+    CataloguePair,
+    Grasp,
+    GraspSet,
+    Gripper,
+    GripperVersion,
+    ObjectModel,
+    ObjectVersion,
+)
 
 from ..pagination import decode_cursor, encode_cursor
 from ..problems import ApiError
@@ -25,6 +35,9 @@ __all__ = [
     "get_grasp_set",
     "catalogue_entry",
     "list_catalogue",
+    "catalogue_history",
+    "release",
+    "withdraw",
     "list_grasps",
     "etag_of",
     "ExportRef",
@@ -43,6 +56,9 @@ class ExportRef:
     version: int
     export_key: str
     export_sha256: str
+    #: catalogue lookups: the set is the released one of its pair; it was made for an older object/gripper version
+    released: bool = False
+    stale: bool = False
 
 
 def _json_default(value: Any) -> Any:
@@ -192,58 +208,272 @@ def preview_ref(session: Session, grasp_set_id: int) -> PreviewRef:
 
 
 def catalogue_entry(session: Session, object: str, gripper: str, version: int | None) -> ExportRef:
-    q = (
-        select(GraspSet.id, GraspSet.version, GraspSet.export_key, GraspSet.export_sha256)
+    """The set the catalogue serves for the pair (services/common/catalogue.py), or its numbered `version` (which is
+    served whatever the rule says, unless it was withdrawn)."""
+    if version is None:
+        row = session.execute(
+            select(
+                GraspSet.id,
+                GraspSet.version,
+                GraspSet.export_key,
+                GraspSet.export_sha256,
+                (CataloguePair.released_id == GraspSet.id).label("released"),
+                CataloguePair.stale,
+            )
+            .select_from(CataloguePair)
+            .join(ObjectModel, ObjectModel.id == CataloguePair.object_id)
+            .join(Gripper, Gripper.id == CataloguePair.gripper_id)
+            .join(GraspSet, GraspSet.id == CataloguePair.current_id)
+            .where(ObjectModel.name == object, Gripper.name == gripper)
+        ).first()
+        if row is None:
+            _pair_ids(session, object, gripper)  # only the miss pays for saying which name is unknown
+            raise ApiError(
+                404,
+                "not-found",
+                f"no grasp set of object {object!r} with gripper {gripper!r} is released or was made for the newest "
+                "object and gripper versions",
+            )
+        return ExportRef(row.id, row.version, row.export_key, row.export_sha256, bool(row.released), bool(row.stale))
+    row = session.execute(
+        select(
+            GraspSet.id,
+            GraspSet.version,
+            GraspSet.export_key,
+            GraspSet.export_sha256,
+            GraspSet.withdrawn_at,
+            GraspSet.object_id,
+            GraspSet.gripper_id,
+            ObjectVersion.version.label("ov"),
+            GripperVersion.version.label("gv"),
+        )
         .join(ObjectModel, ObjectModel.id == GraspSet.object_id)
         .join(Gripper, Gripper.id == GraspSet.gripper_id)
-        .where(ObjectModel.name == object, Gripper.name == gripper)
-    )
-    q = q.where(GraspSet.version == version) if version else q.order_by(GraspSet.version.desc()).limit(1)
-    row = session.execute(q).first()
+        .join(ObjectVersion, ObjectVersion.id == GraspSet.object_version_id)
+        .join(GripperVersion, GripperVersion.id == GraspSet.gripper_version_id)
+        .where(ObjectModel.name == object, Gripper.name == gripper, GraspSet.version == version)
+    ).first()
     if row is None:
-        # only the miss pays for saying which name is unknown
-        _id_of(session, ObjectModel, object, "object")
-        _id_of(session, Gripper, gripper, "gripper")
-        what = f"version {version}" if version else "grasp set"
-        raise ApiError(404, "not-found", f"no {what} for object {object!r} with gripper {gripper!r}")
-    return ExportRef(*row)
+        _pair_ids(session, object, gripper)
+        raise ApiError(404, "not-found", f"no version {version} for object {object!r} with gripper {gripper!r}")
+    if row.withdrawn_at is not None:
+        raise ApiError(
+            404, "withdrawn", f"version {version} of object {object!r} with gripper {gripper!r} was withdrawn"
+        )
+    released = session.execute(
+        select(CataloguePair.released_id).where(
+            CataloguePair.object_id == row.object_id, CataloguePair.gripper_id == row.gripper_id
+        )
+    ).scalar_one_or_none()
+    newest_ov = session.execute(
+        select(func.max(ObjectVersion.version)).where(ObjectVersion.object_id == row.object_id)
+    ).scalar_one()
+    newest_gv = session.execute(
+        select(func.max(GripperVersion.version)).where(GripperVersion.gripper_id == row.gripper_id)
+    ).scalar_one()
+    return ExportRef(
+        row.id,
+        row.version,
+        row.export_key,
+        row.export_sha256,
+        released == row.id,
+        (row.ov, row.gv) != (newest_ov, newest_gv),
+    )
+
+
+def _pair_ids(session: Session, object: str, gripper: str) -> tuple[int, int]:
+    return _id_of(session, ObjectModel, object, "object"), _id_of(session, Gripper, gripper, "gripper")
+
+
+def _catalogue_item(row: Any, summary: dict[str, Any] | None, gripper: str) -> dict[str, Any]:
+    """A fleet-sync entry: the current set's summary with the pair's state, or, when the pair serves nothing any
+    more (its set was withdrawn, or a newer object or gripper version has no set yet), `id: null, withdrawn: true`."""
+    pair = {
+        "released": row.released_id is not None and row.released_id == row.current_id,
+        "stale": bool(row.stale),
+        "withdrawn": row.current_id is None,
+        "change_seq": int(row.change_seq),
+    }
+    if summary is not None:
+        return {**summary, **pair}
+    return {
+        "id": None,
+        "object": row.object,
+        "gripper": gripper,
+        **pair,
+        "links": {"catalogue": f"/v1/catalogue/{row.object}/{gripper}"},
+    }
 
 
 def list_catalogue(
-    session: Session, *, gripper: str, updated_since: datetime | None, cursor: str | None, limit: int
+    session: Session,
+    *,
+    gripper: str,
+    since: int | None = None,
+    updated_since: datetime | None = None,
+    cursor: str | None = None,
+    limit: int,
 ) -> tuple[dict[str, Any], str]:
-    """The newest grasp set of every object for `gripper`, by object name; returns (body, strong ETag)."""
-    key = decode_cursor(cursor, (str,))
+    """Fleet sync for `gripper`; returns (body, strong ETag).
+
+    Without `since`: the current set of every object (pairs serving nothing are left out), by object name.
+    With `since`: every pair whose served set changed after that change number, in change order, including pairs
+    that serve nothing now (`withdrawn: true`), so a robot drops them. Either way `next_since` is the watermark to
+    send as `since` next time: every change up to it is in what this listing returned (docs/SERVICE.md).
+    """
     grip_id = _id_of(session, Gripper, gripper, "gripper")
-    newest = (
-        select(GraspSet.object_id.label("object_id"), func.max(GraspSet.version).label("version"))
-        .where(GraspSet.gripper_id == grip_id)
-        .group_by(GraspSet.object_id)
-        .subquery()
-    )
-    q = (
-        summary_select()
-        .join(newest, (newest.c.object_id == GraspSet.object_id) & (newest.c.version == GraspSet.version))
-        .where(GraspSet.gripper_id == grip_id)
-    )
-    if updated_since is not None:
-        q = q.where(GraspSet.created_at > updated_since)
+    by_seq = since is not None
+    key = decode_cursor(cursor, (int, int) if by_seq else (str, int))
+    if by_seq and since < 0:
+        raise ApiError(422, "validation-error", "since must be >= 0", field="since")
     if key:
-        q = q.where(ObjectModel.name > key[0])
-    rows = session.execute(q.order_by(ObjectModel.name).limit(limit + 1)).all()
+        after, mark = key
+    else:
+        after = since if by_seq else None
+        # read before the rows: every change numbered up to the mark committed before it (the counter lock), so the
+        # rows, read later, contain them all
+        mark = session.execute(
+            select(func.coalesce(func.max(CataloguePair.change_seq), 0)).where(CataloguePair.gripper_id == grip_id)
+        ).scalar_one()
+        mark = max(int(mark), since or 0)
+    pairs = (
+        select(
+            CataloguePair.object_id,
+            CataloguePair.current_id,
+            CataloguePair.released_id,
+            CataloguePair.stale,
+            CataloguePair.change_seq,
+            ObjectModel.name.label("object"),
+        )
+        .join(ObjectModel, ObjectModel.id == CataloguePair.object_id)
+        .where(CataloguePair.gripper_id == grip_id)
+    )
+    if by_seq:
+        pairs = pairs.where(CataloguePair.change_seq > after).order_by(CataloguePair.change_seq)
+    else:
+        pairs = pairs.where(CataloguePair.current_id.is_not(None)).order_by(ObjectModel.name)
+        if after is not None:
+            pairs = pairs.where(ObjectModel.name > after)
+        if updated_since is not None:
+            # compatibility: the current set was created after that instant (the worker's clock; prefer `since`)
+            pairs = pairs.join(GraspSet, GraspSet.id == CataloguePair.current_id).where(
+                GraspSet.created_at > updated_since
+            )
+    rows = session.execute(pairs.limit(limit + 1)).all()
     more = len(rows) > limit
     rows = rows[:limit]
-    nxt = encode_cursor([rows[-1].object]) if more and rows else None
-    since = f"&updated_since={updated_since.isoformat()}" if updated_since else ""
+    ids = [r.current_id for r in rows if r.current_id is not None]
+    summaries = (
+        {r.id: summary_out(r) for r in session.execute(summary_select().where(GraspSet.id.in_(ids))).all()}
+        if ids
+        else {}
+    )
+    items = [_catalogue_item(r, summaries.get(r.current_id), gripper) for r in rows]
+    nxt = None
+    if more and rows:
+        nxt = encode_cursor([rows[-1].change_seq, mark] if by_seq else [rows[-1].object, mark])
+    if by_seq:
+        delivered = max((int(r.change_seq) for r in rows), default=0)
+        # a page cut short resumes after its last item; the last page after everything seen so far
+        next_since = delivered if more else max(mark, delivered)
+    else:
+        next_since = mark
+    query = f"&since={since}" if by_seq else ""
+    query += f"&updated_since={updated_since.isoformat()}" if updated_since else ""
     body = {
         "gripper": gripper,
-        "items": [summary_out(r) for r in rows],
+        "items": items,
         "next_cursor": nxt,
-        "links": {"next": f"/v1/catalogue?gripper={gripper}{since}&cursor={nxt}&limit={limit}" if nxt else None},
+        "next_since": next_since,
+        "links": {
+            "next": f"/v1/catalogue?gripper={gripper}{query}&cursor={nxt}&limit={limit}" if nxt else None,
+            "sync": f"/v1/catalogue?gripper={gripper}&since={next_since}",
+        },
     }
-    # the page is a function of its grasp-set ids and export hashes, so hashing those is a strong validator
-    basis = json.dumps([gripper, nxt, [(r.id, r.export_sha256) for r in rows]]).encode()
-    return body, etag_of(hashlib.sha256(basis).hexdigest())
+    # the page is a function of its content: hashing it is a strong validator
+    return body, etag_of(hashlib.sha256(dumps(body)).hexdigest())
+
+
+def catalogue_history(session: Session, object: str, gripper: str, *, cursor: str | None, limit: int) -> dict[str, Any]:
+    """Releases and withdrawals of a pair, newest first."""
+    object_id, gripper_id = _pair_ids(session, object, gripper)
+    key = _int_cursor(cursor)
+    q = (
+        select(CatalogueEvent, GraspSet.version)
+        .join(GraspSet, GraspSet.id == CatalogueEvent.grasp_set_id)
+        .where(CatalogueEvent.object_id == object_id, CatalogueEvent.gripper_id == gripper_id)
+    )
+    if key:
+        q = q.where(CatalogueEvent.id < key[0])
+    rows = session.execute(q.order_by(CatalogueEvent.id.desc()).limit(limit + 1)).all()
+    more = len(rows) > limit
+    rows = rows[:limit]
+    nxt = encode_cursor([rows[-1][0].id]) if more and rows else None
+    return {
+        "object": object,
+        "gripper": gripper,
+        "items": [event_out(e, v) for e, v in rows],
+        "next_cursor": nxt,
+        "links": {
+            "next": f"/v1/catalogue/{object}/{gripper}/history?cursor={nxt}&limit={limit}" if nxt else None,
+            "catalogue": f"/v1/catalogue/{object}/{gripper}",
+        },
+    }
+
+
+def event_out(e: CatalogueEvent, version: int) -> dict[str, Any]:
+    return {
+        "grasp_set": e.grasp_set_id,
+        "version": version,
+        "action": e.action,
+        "at": e.at,
+        "by": e.by,
+        "replaced": e.replaced_id,
+        "links": {"grasp_set": f"/v1/grasp-sets/{e.grasp_set_id}"},
+    }
+
+
+def _change(session: Session, grasp_set_id: int, by: str, action: str) -> dict[str, Any]:
+    do = catalogue.release if action == "release" else catalogue.withdraw
+    try:
+        state, event = do(session, grasp_set_id, by)
+    except catalogue.CatalogueError as exc:
+        session.rollback()
+        raise ApiError(exc.status, exc.code, exc.detail) from None
+    session.commit()
+    names = session.execute(
+        select(ObjectModel.name, Gripper.name, GraspSet.version)
+        .join(Gripper, Gripper.id == GraspSet.gripper_id)
+        .join(ObjectModel, ObjectModel.id == GraspSet.object_id)
+        .where(GraspSet.id == grasp_set_id)
+    ).one()
+    obj, grip, version = names
+    return {
+        "grasp_set": grasp_set_id,
+        "version": version,
+        "object": obj,
+        "gripper": grip,
+        "action": action,
+        "changed": event is not None,
+        "event": event_out(event, version) if event is not None else None,
+        "current": state.current_id,
+        "released": state.released_id,
+        "stale": state.stale,
+        "change_seq": state.change_seq,
+        "links": {
+            "grasp_set": f"/v1/grasp-sets/{grasp_set_id}",
+            "catalogue": f"/v1/catalogue/{obj}/{grip}",
+            "history": f"/v1/catalogue/{obj}/{grip}/history",
+        },
+    }
+
+
+def release(session: Session, grasp_set_id: int, by: str) -> dict[str, Any]:
+    return _change(session, grasp_set_id, by, "release")
+
+
+def withdraw(session: Session, grasp_set_id: int, by: str) -> dict[str, Any]:
+    return _change(session, grasp_set_id, by, "withdraw")
 
 
 def list_grasps(

@@ -9,6 +9,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from graspgen.gripper import GripperSpec
+from services.common import catalogue
 from services.common.jobs import sha256_json
 from services.common.models import Gripper, GripperVersion, utcnow
 
@@ -56,6 +57,9 @@ def create_gripper(session: Session, data: Any) -> tuple[dict[str, Any], bool]:
             v = GripperVersion(gripper_id=g.id, version=(latest or 0) + 1, spec=spec, spec_sha256=digest)
             g.updated_at = utcnow()
             session.add(v)
+            session.flush()
+            # sets for the older version are no longer "the newest" (a released one turns stale)
+            catalogue.refresh(session, gripper_id=g.id)
             session.commit()
             return version_out(name, v), True
         except IntegrityError:

@@ -14,6 +14,7 @@ from sqlalchemy.orm import Session
 
 from graspgen.gripper import SLUG_PATTERN
 from graspgen.units import to_metres_scale
+from services.common import catalogue
 from services.common.models import ObjectModel, ObjectVersion, utcnow
 from services.common.settings import Settings
 from services.common.storage import Storage
@@ -147,6 +148,9 @@ def upload_object(
             )
             obj.updated_at = utcnow()
             session.add(v)
+            session.flush()
+            # sets for the older version are no longer "the newest" (a released one turns stale)
+            catalogue.refresh(session, object_id=obj.id)
             session.commit()
             return version_out(name, v), True
         except IntegrityError:

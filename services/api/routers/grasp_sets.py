@@ -9,10 +9,10 @@ from fastapi import APIRouter, Path, Query, Request, Response
 
 from ...common.storage import Storage
 from ..crud import grasp_sets as crud
-from ..deps import ReadDep, ReadSessionDep, SettingsDep, StorageDep
+from ..deps import ReadDep, ReadSessionDep, SessionDep, SettingsDep, StorageDep, WriteDep
 from ..http import IMMUTABLE, REVALIDATE, BlobCache, blob_response, etag_matches, not_modified
 from ..problems import ApiError
-from ..schemas import ID_MAX, SLUG, GraspPage, GraspSetPage
+from ..schemas import ID_MAX, SLUG, CatalogueChange, CatalogueHistoryPage, CataloguePage, GraspPage, GraspSetPage
 from . import problems
 
 router = APIRouter(prefix="/v1", tags=["grasp sets"])
@@ -257,12 +257,16 @@ def list_grasps(
 
 @router.get(
     "/catalogue",
-    response_model=GraspSetPage,
+    response_model=CataloguePage,
     tags=["catalogue"],
-    summary="Fleet sync: the newest grasp set of every object for a gripper",
-    description="Summaries with links, ordered by object name, paginated by cursor. `updated_since` keeps only "
-    "objects whose newest grasp set was created after that instant. Send the page's ETag back in If-None-Match "
-    "to get a 304 when nothing changed.",
+    summary="Fleet sync: the current grasp set of every object for a gripper",
+    description="Without `since`: the current set (the released one, else the newest for the newest object and "
+    "gripper versions) of every object that has one, by object name, paginated by cursor; `updated_since` keeps only "
+    "those whose current set was created after that instant (kept for compatibility: it relies on clocks). "
+    "With `since` (a `next_since` from an earlier answer): every pair whose current set changed after it, in change "
+    "order, including pairs that serve nothing now (`id: null, withdrawn: true`: drop them). Store `next_since` "
+    "after each page and send it as `since` next time: no change is ever missed (docs/SERVICE.md). Send the page's "
+    "ETag back in If-None-Match to get a 304 when nothing changed.",
     responses=problems(304, 404, 422),
 )
 def list_catalogue(
@@ -271,6 +275,9 @@ def list_catalogue(
     session: ReadSessionDep,
     settings: SettingsDep,
     gripper: Annotated[str, Query(pattern=SLUG, examples=["pgn-80"])],
+    since: Annotated[
+        int | None, Query(ge=0, le=2**62, description="change number: `next_since` of the previous sync")
+    ] = None,
     updated_since: Annotated[datetime | None, Query(description="ISO 8601; naive times are UTC")] = None,
     cursor: str | None = None,
     limit: Annotated[int | None, Query(ge=1)] = None,
@@ -282,6 +289,7 @@ def list_catalogue(
     body, etag = crud.list_catalogue(
         session,
         gripper=gripper,
+        since=since,
         updated_since=updated_since,
         cursor=cursor,
         limit=min(limit or settings.page_size_default, settings.page_size_max),
@@ -293,12 +301,28 @@ def list_catalogue(
     )
 
 
+_CATALOGUE_HEADERS = {
+    "Graspgen-Set-Id": {"description": "id of the grasp set served", "schema": {"type": "integer"}},
+    "Graspgen-Released": {"description": "true: the released set of the pair", "schema": {"type": "string"}},
+    "Graspgen-Stale": {
+        "description": "true: made for an older object or gripper version (only a released set is served so)",
+        "schema": {"type": "string"},
+    },
+}
+
+
 @router.get(
     "/catalogue/{object}/{gripper}",
     tags=["catalogue"],
-    summary="The newest (or the given version's) grasp set of an object for a gripper, as exported",
+    summary="The grasp set robots should use for an object and a gripper (or a given version), as exported",
+    description="The released set of the pair if there is one; otherwise the newest set computed for the newest "
+    "object version and the newest gripper version (a set for an older version is never served unless released). "
+    "A withdrawn set is never served. 404 when no set qualifies. `version` asks for one numbered set instead.",
     response_class=Response,
-    responses={**_EXPORT_RESPONSE, **problems(304, 404, 422)},
+    responses={
+        200: {**_EXPORT_RESPONSE[200], "headers": {**_EXPORT_RESPONSE[200]["headers"], **_CATALOGUE_HEADERS}},
+        **problems(304, 404, 422),
+    },
 )
 def get_catalogue_entry(
     request: Request,
@@ -309,5 +333,56 @@ def get_catalogue_entry(
     version: Annotated[int | None, Query(ge=1, le=ID_MAX)] = None,
 ) -> Response:
     ref = crud.catalogue_entry(session, object, gripper, version)
-    # a numbered version never changes; "the newest" does, so clients revalidate it with the ETag
-    return export_response(request, ref, cache_control=IMMUTABLE if version else REVALIDATE)
+    # a numbered version never changes; "the current one" does, so clients revalidate it with the ETag
+    response = export_response(request, ref, cache_control=IMMUTABLE if version else REVALIDATE)
+    response.headers["Graspgen-Set-Id"] = str(ref.id)
+    response.headers["Graspgen-Released"] = "true" if ref.released else "false"
+    response.headers["Graspgen-Stale"] = "true" if ref.stale else "false"
+    return response
+
+
+@router.get(
+    "/catalogue/{object}/{gripper}/history",
+    response_model=CatalogueHistoryPage,
+    tags=["catalogue"],
+    summary="Releases and withdrawals of an object and gripper pair, newest first (who and when)",
+    responses=problems(404, 422),
+)
+def get_catalogue_history(
+    object: Annotated[str, Path(pattern=SLUG)],
+    gripper: Annotated[str, Path(pattern=SLUG)],
+    principal: ReadDep,
+    session: ReadSessionDep,
+    settings: SettingsDep,
+    cursor: str | None = None,
+    limit: Annotated[int | None, Query(ge=1)] = None,
+) -> dict:
+    return crud.catalogue_history(
+        session, object, gripper, cursor=cursor, limit=min(limit or settings.page_size_default, settings.page_size_max)
+    )
+
+
+@router.post(
+    "/grasp-sets/{grasp_set_id}/release",
+    response_model=CatalogueChange,
+    tags=["catalogue"],
+    summary="Release a grasp set: the catalogue serves it for its pair until another is released or it is withdrawn",
+    description="One released set per object and gripper pair; the previous release stays in the history. A "
+    "withdrawn set is reinstated. Releasing the released set again changes nothing (`changed: false`).",
+    responses=problems(404, 422),
+)
+def release_grasp_set(grasp_set_id: GraspSetId, principal: WriteDep, session: SessionDep) -> dict:
+    return crud.release(session, grasp_set_id, principal.name)
+
+
+@router.post(
+    "/grasp-sets/{grasp_set_id}/withdraw",
+    response_model=CatalogueChange,
+    tags=["catalogue"],
+    summary="Withdraw a grasp set: the catalogue never serves it again (released or newest)",
+    description="If it was the released set, the pair has no release until the next one and serves the newest set "
+    "for the newest versions. Withdrawing a withdrawn set changes nothing (`changed: false`).",
+    responses=problems(404, 422),
+)
+def withdraw_grasp_set(grasp_set_id: GraspSetId, principal: WriteDep, session: SessionDep) -> dict:
+    return crud.withdraw(session, grasp_set_id, principal.name)

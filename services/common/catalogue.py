@@ -1,0 +1,217 @@
+"""What the catalogue serves for each object x gripper pair, and the change sequence that fleet sync pages by.
+
+The rule (CONTRACT.md, HTTP API): the released set of the pair if there is one; otherwise the newest set computed for
+the newest object version and the newest gripper version. A withdrawn set is never served (neither as released nor as
+the newest). A released set stays current after newer versions appear and is then `stale`.
+
+`catalogue_pairs` holds the result, recomputed by `refresh` in the transaction of every change that can alter it: a
+new grasp set (worker), a new object or gripper version, a release, a withdrawal. Every pair whose served state
+changes gets the next number of the change sequence (`change_counter`, one row).
+
+Why a locked counter rather than a database sequence: a sequence hands out numbers at call time, so a transaction
+holding 7 can commit after one holding 8; a client that synced up to 8 would never see 7. Here the counter row stays
+locked (`SELECT ... FOR UPDATE`) from the first number a transaction takes until it commits, so changes commit in
+sequence order and any snapshot that shows number N shows every number below it. A reader can therefore take the
+largest number it sees as its watermark. Catalogue changes are rare (seconds apart), and the lock is taken last, just
+before commit, so the serialisation costs nothing measurable. Holders of the counter lock take no other lock after it
+except catalogue rows, which only holders touch, so it cannot deadlock. SQLite serialises all writers anyway.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from sqlalchemy import select, update
+from sqlalchemy.orm import Session
+
+from .models import (
+    CatalogueEvent,
+    CataloguePair,
+    ChangeCounter,
+    GraspSet,
+    GripperVersion,
+    ObjectVersion,
+    utcnow,
+)
+
+__all__ = ["ChangeSequence", "refresh", "release", "withdraw", "PairState", "CatalogueError"]
+
+
+class CatalogueError(Exception):
+    """A release or withdrawal that cannot be done (the API maps `code` to a problem)."""
+
+    def __init__(self, status: int, code: str, detail: str) -> None:
+        super().__init__(detail)
+        self.status, self.code, self.detail = status, code, detail
+
+
+class ChangeSequence:
+    """The counter row, locked for the rest of the transaction; `take()` hands out the next number."""
+
+    def __init__(self, session: Session) -> None:
+        self.session = session
+        value = session.execute(
+            select(ChangeCounter.value).where(ChangeCounter.id == 1).with_for_update()
+        ).scalar_one_or_none()
+        if value is None:  # a database created without the migration's row (never in production)
+            session.add(ChangeCounter(id=1, value=0))
+            session.flush()
+            value = 0
+        self.start = self.value = int(value)
+
+    def take(self) -> int:
+        self.value += 1
+        return self.value
+
+    def save(self) -> None:
+        if self.value != self.start:
+            self.session.execute(update(ChangeCounter).where(ChangeCounter.id == 1).values(value=self.value))
+            self.start = self.value
+
+
+@dataclass(frozen=True)
+class PairState:
+    object_id: int
+    gripper_id: int
+    current_id: int | None
+    released_id: int | None
+    stale: bool
+    change_seq: int
+
+
+def _newest(session: Session, column, owner, owner_id: int) -> int | None:  # type: ignore[no-untyped-def]
+    model = column.class_
+    return session.execute(
+        select(model.id).where(owner == owner_id).order_by(model.version.desc()).limit(1)
+    ).scalar_one_or_none()
+
+
+def _compute(session: Session, pair: CataloguePair) -> tuple[int | None, bool]:
+    """(current set id, stale) of a pair from its released set and the newest versions."""
+    ov = _newest(session, ObjectVersion.id, ObjectVersion.object_id, pair.object_id)
+    gv = _newest(session, GripperVersion.id, GripperVersion.gripper_id, pair.gripper_id)
+    if pair.released_id is not None:
+        row = session.execute(
+            select(GraspSet.object_version_id, GraspSet.gripper_version_id, GraspSet.withdrawn_at).where(
+                GraspSet.id == pair.released_id
+            )
+        ).one()
+        if row.withdrawn_at is None:
+            return pair.released_id, (row.object_version_id != ov or row.gripper_version_id != gv)
+        pair.released_id = None  # a withdrawn set is never the released one
+    current = session.execute(
+        select(GraspSet.id)
+        .where(
+            GraspSet.object_id == pair.object_id,
+            GraspSet.gripper_id == pair.gripper_id,
+            GraspSet.object_version_id == ov,
+            GraspSet.gripper_version_id == gv,
+            GraspSet.withdrawn_at.is_(None),
+        )
+        .order_by(GraspSet.version.desc())
+        .limit(1)
+    ).scalar_one_or_none()
+    return current, False
+
+
+def _refresh_pair(session: Session, seq: ChangeSequence, pair: CataloguePair, *, force: bool = False) -> bool:
+    before = (pair.current_id, pair.released_id, pair.stale)
+    pair.current_id, pair.stale = _compute(session, pair)
+    if force or (pair.current_id, pair.released_id, pair.stale) != before:
+        pair.change_seq = seq.take()
+        pair.updated_at = utcnow()
+        return True
+    return False
+
+
+def _pair(session: Session, seq: ChangeSequence, object_id: int, gripper_id: int) -> CataloguePair:
+    pair = session.execute(
+        select(CataloguePair).where(CataloguePair.object_id == object_id, CataloguePair.gripper_id == gripper_id)
+    ).scalar_one_or_none()
+    if pair is None:
+        pair = CataloguePair(
+            object_id=object_id, gripper_id=gripper_id, released_id=None, current_id=None, stale=False, change_seq=0
+        )
+        session.add(pair)
+    return pair
+
+
+def refresh(session: Session, *, object_id: int | None = None, gripper_id: int | None = None) -> int:
+    """Recompute the pairs a change touched: one pair (both ids; created if new), or every pair of an object or of a
+    gripper (one id). Call it last in the changing transaction: it takes the counter lock until commit. Returns how
+    many pairs changed what they serve."""
+    seq = ChangeSequence(session)
+    if object_id is not None and gripper_id is not None:
+        pairs = [_pair(session, seq, object_id, gripper_id)]
+    else:
+        q = select(CataloguePair)
+        if object_id is not None:
+            q = q.where(CataloguePair.object_id == object_id)
+        elif gripper_id is not None:
+            q = q.where(CataloguePair.gripper_id == gripper_id)
+        else:
+            raise ValueError("refresh needs an object id, a gripper id or both")
+        pairs = list(session.execute(q.order_by(CataloguePair.object_id, CataloguePair.gripper_id)).scalars())
+    changed = sum(_refresh_pair(session, seq, p, force=p.change_seq == 0) for p in pairs)
+    seq.save()
+    session.flush()
+    return changed
+
+
+def _state(pair: CataloguePair) -> PairState:
+    return PairState(pair.object_id, pair.gripper_id, pair.current_id, pair.released_id, pair.stale, pair.change_seq)
+
+
+def _locked_set(session: Session, grasp_set_id: int) -> tuple[GraspSet, ChangeSequence]:
+    # the counter first: every catalogue change is serialised behind it, so the pair read below is the latest
+    seq = ChangeSequence(session)
+    gs = session.get(GraspSet, grasp_set_id, populate_existing=True)
+    if gs is None:
+        raise CatalogueError(404, "not-found", f"no grasp set {grasp_set_id}")
+    return gs, seq
+
+
+def release(session: Session, grasp_set_id: int, by: str) -> tuple[PairState, CatalogueEvent | None]:
+    """Make the set the released one of its pair (a withdrawn set is reinstated). Releasing the released set again
+    changes nothing and records nothing (event None)."""
+    gs, seq = _locked_set(session, grasp_set_id)
+    pair = _pair(session, seq, gs.object_id, gs.gripper_id)
+    if pair.released_id == gs.id and gs.withdrawn_at is None:
+        return _state(pair), None
+    event = CatalogueEvent(
+        object_id=gs.object_id,
+        gripper_id=gs.gripper_id,
+        grasp_set_id=gs.id,
+        action="release",
+        at=utcnow(),
+        by=by,
+        replaced_id=pair.released_id,
+    )
+    session.add(event)
+    gs.withdrawn_at = None
+    pair.released_id = gs.id
+    _refresh_pair(session, seq, pair, force=True)
+    seq.save()
+    session.flush()
+    return _state(pair), event
+
+
+def withdraw(session: Session, grasp_set_id: int, by: str) -> tuple[PairState, CatalogueEvent | None]:
+    """The set is never served again by the catalogue (neither as released nor as the newest); the pair falls back
+    to the rule without it. Withdrawing a withdrawn set changes nothing (event None)."""
+    gs, seq = _locked_set(session, grasp_set_id)
+    pair = _pair(session, seq, gs.object_id, gs.gripper_id)
+    if gs.withdrawn_at is not None:
+        return _state(pair), None
+    at = utcnow()
+    event = CatalogueEvent(
+        object_id=gs.object_id, gripper_id=gs.gripper_id, grasp_set_id=gs.id, action="withdraw", at=at, by=by
+    )
+    session.add(event)
+    gs.withdrawn_at = at
+    if pair.released_id == gs.id:
+        pair.released_id = None
+    _refresh_pair(session, seq, pair, force=pair.change_seq == 0)
+    seq.save()
+    session.flush()
+    return _state(pair), event
