@@ -47,15 +47,42 @@ def _settings():  # type: ignore[no-untyped-def]
         return None
 
 
-def _logging(level: str) -> None:
-    logging.basicConfig(level=level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+def _logging(level: str, fmt: str = "text") -> None:
+    from services.common.logs import configure_logging
+
+    configure_logging(level, fmt)  # request and job ids on every line; JSON lines with GRASPGEN_LOG_FORMAT=json
+
+
+def _metrics_dir(settings) -> None:  # type: ignore[no-untyped-def]
+    """prometheus-client's multiprocess mode for a command whose processes share numbers (serve --workers N, the
+    Celery prefork pool): it reads PROMETHEUS_MULTIPROC_DIR when first imported, so this runs before that import."""
+    import os
+    import tempfile
+    from pathlib import Path
+
+    path = settings.metrics_dir or Path(tempfile.mkdtemp(prefix="graspgen-metrics-"))
+    path.mkdir(parents=True, exist_ok=True)
+    for old in path.glob("*.db"):  # a previous run's values
+        old.unlink()
+    os.environ["PROMETHEUS_MULTIPROC_DIR"] = str(path)
+
+
+def _metrics_server(settings, dispatcher=None) -> None:  # type: ignore[no-untyped-def]
+    """The unauthenticated /metrics listener of GRASPGEN_METRICS_PORT, in a daemon thread of this process."""
+    if settings.metrics_port is None:
+        return
+    from services.api.observability import queue_depth_reader
+    from services.common.metrics import QueueDepthCollector, scrape_registry, start_metrics_server
+
+    registry = scrape_registry([QueueDepthCollector(queue_depth_reader(settings, dispatcher))])
+    start_metrics_server(settings.metrics_port, settings.metrics_host, registry)
 
 
 def _serve(args: argparse.Namespace) -> int:
     settings = _settings()
     if settings is None:
         return 2
-    _logging(settings.log_level)
+    _logging(settings.log_level, settings.log_format)
     from services.common.migrate import upgrade
     from services.common.tokens import TokensFileError, bootstrap_tokens_file
 
@@ -80,6 +107,8 @@ def _serve(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 2
+    if workers > 1:
+        _metrics_dir(settings)  # before create_app imports the metrics
     try:
         app = create_app(settings)  # also checks the tokens file before any worker process starts
     except TokensFileError as exc:
@@ -92,6 +121,7 @@ def _serve(args: argparse.Namespace) -> int:
         log_config=None,
         server_header=False,
     )
+    _metrics_server(settings, app.state.dispatcher if workers == 1 else None)
     if workers > 1:
         # each process builds its own app from the same environment
         uvicorn.run("services.api.app:create_app", factory=True, workers=workers, **options)
@@ -111,8 +141,12 @@ def _worker(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 2
-    _logging(settings.log_level)
+    _logging(settings.log_level, settings.log_format)
+    if settings.metrics_port is not None:
+        _metrics_dir(settings)  # the prefork children count jobs; the main process serves their sum
     from services.worker.celery_app import celery_app
+
+    _metrics_server(settings)
 
     argv = [
         "worker",
@@ -132,7 +166,7 @@ def _migrate(args: argparse.Namespace) -> int:
     settings = _settings()
     if settings is None:
         return 2
-    _logging(settings.log_level)
+    _logging(settings.log_level, settings.log_format)
     from services.common.db import redacted_url
     from services.common.migrate import upgrade
 

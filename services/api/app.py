@@ -15,10 +15,11 @@ from services.common.storage import make_storage
 from services.common.tokens import TokenStore
 from services.worker.dispatch import Dispatcher, EmbeddedDispatcher, make_dispatcher
 
+from . import observability
 from .http import BlobCache
 from .limits import MULTIPART_OVERHEAD, BodyLimitMiddleware
 from .problems import install_problem_handlers, problem_schema
-from .routers import grasp_sets, grippers, health, jobs, objects
+from .routers import grasp_sets, grippers, health, jobs, objects, previews
 
 __all__ = ["create_app"]
 
@@ -58,6 +59,7 @@ def create_app(
         try:
             yield
         finally:
+            app.state.previews.close()
             dispatcher.close()
             db.dispose()
 
@@ -82,8 +84,10 @@ def create_app(
     app.state.export_cache = BlobCache(storage, settings.export_cache_bytes)
     app.state.dispatcher = dispatcher
     install_problem_handlers(app)
-    for r in (objects.router, grippers.router, jobs.router, grasp_sets.router, health.router):
+    for r in (objects.router, grippers.router, jobs.router, grasp_sets.router, previews.router, health.router):
         app.include_router(r)
+    previews.install(app, settings)
+    observability.install(app, settings, dispatcher)  # request ids, /metrics, rate limits (issue 16)
     app.add_middleware(
         BodyLimitMiddleware,
         default_limit=settings.max_json_bytes,

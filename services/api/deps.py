@@ -75,6 +75,9 @@ async def get_principal(
     principal = tokens.authenticate(credentials.credentials)
     if principal is None:
         raise ApiError(401, "unauthorized", "the bearer token is not valid", headers=challenge)
+    from .observability import check_rate
+
+    check_rate(request, principal.name)  # 429 when per-token rate limits are on and this token is over its rate
     return principal
 
 

@@ -74,11 +74,15 @@ class BlobCache:
         self._lock = threading.Lock()
 
     def get(self, key: str) -> bytes:
+        from services.common.metrics import EXPORT_CACHE
+
         with self._lock:
             data = self._items.get(key)
             if data is not None:
                 self._items.move_to_end(key)
-                return data
+        EXPORT_CACHE.labels("miss" if data is None else "hit").inc()
+        if data is not None:
+            return data
         data = self.storage.get_bytes(key)
         if len(data) <= self.max_bytes:
             with self._lock:

@@ -55,7 +55,10 @@ class Database:
         self.engine = _make_engine(self.url, settings)
         self.sessions = sessionmaker(self.engine, expire_on_commit=False)
         if self.is_sqlite:
-            self.read_sessions = self.sessions
+            # a plain (deferred) BEGIN: in WAL mode readers then never wait for the writer's lock (see _on_begin)
+            self.read_sessions = sessionmaker(
+                self.engine.execution_options(graspgen_read_only=True), expire_on_commit=False
+            )
         else:
             # reads need no transaction: in autocommit a lookup is one round trip instead of BEGIN, SELECT, ROLLBACK;
             # the option engine shares the pool and sets autocommit per checkout
@@ -173,4 +176,7 @@ def _sqlite_pragmas(engine: Engine) -> None:
 
     @event.listens_for(engine, "begin")
     def _on_begin(conn):  # type: ignore[no-untyped-def]
-        conn.exec_driver_sql("BEGIN IMMEDIATE")
+        # read sessions (API GETs) read a WAL snapshot and take no lock; everything else may write, so it takes the
+        # write lock up front: four preview renders holding BEGIN IMMEDIATE once made catalogue lookups wait 30 s
+        read_only = conn.get_execution_options().get("graspgen_read_only", False)
+        conn.exec_driver_sql("BEGIN" if read_only else "BEGIN IMMEDIATE")

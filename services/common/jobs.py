@@ -61,6 +61,19 @@ def finish(job: Job, state: str, error: dict[str, Any] | None = None) -> None:
     if state == "succeeded":
         job.progress = 1.0
         job.stage = "done"
+    _count_finished(job)
+
+
+def _count_finished(job: Job) -> None:
+    """graspgen_jobs_finished_total and graspgen_job_duration_seconds, in the process that writes the final state."""
+    from .metrics import JOB_DURATION, JOBS_FINISHED
+
+    JOBS_FINISHED.labels(job.kind, job.state).inc()
+    created, finished = job.created_at, job.finished_at
+    if created is not None and finished is not None:
+        if created.tzinfo is None:  # SQLite hands back naive UTC
+            created = created.replace(tzinfo=finished.tzinfo)
+        JOB_DURATION.labels(job.kind, job.state).observe(max(0.0, (finished - created).total_seconds()))
 
 
 @dataclass(frozen=True)

@@ -51,6 +51,8 @@ class Settings(BaseSettings):
     page_size_max: int = Field(default=500, ge=1, le=10_000)
     #: grasp-set exports kept in the API's memory (they are immutable, so the cache is never invalidated)
     export_cache_bytes: int = Field(default=64 * 1024 * 1024, ge=0)
+    #: prepared candidate pairs of grasp sets kept for the pick query (about 100 bytes per candidate roll)
+    pick_cache_bytes: int = Field(default=512 * 1024 * 1024, ge=0)
 
     # -- jobs -----------------------------------------------------------------------------------------------------
     job_soft_time_limit_s: int = Field(default=900, ge=1)
@@ -80,6 +82,29 @@ class Settings(BaseSettings):
     #: API processes (uvicorn workers); more than one needs a broker, since in-process jobs would run per process
     web_workers: int = Field(default=1, ge=1, le=64)
     log_level: Literal["debug", "info", "warning", "error"] = "info"
+
+    # -- observability and isolation (docs/SERVICE.md Observability) ----------------------------------------------
+    #: `json`: one JSON object per log line (time, level, logger, message, request_id, job_id)
+    log_format: Literal["text", "json"] = "text"
+    #: an unauthenticated plain-HTTP /metrics on this port, besides the API's `GET /metrics` (scope admin); the only
+    #: way to read a `graspgen worker`'s metrics; unset: none
+    metrics_port: int | None = Field(default=None, ge=1, le=65535)
+    metrics_host: str = "127.0.0.1"
+    #: where the processes of `serve --workers N` or of a worker's prefork pool share metric values; unset: a new
+    #: temporary directory per start
+    metrics_dir: Path | None = None
+    #: preview.png renders at a time, each in its own process at a lower CPU priority (never on the request's thread)
+    preview_workers: int = Field(default=2, ge=1, le=16)
+    #: previews waiting for a render process; beyond this a preview request gets a 503 with Retry-After at once
+    preview_queue: int = Field(default=4, ge=0, le=1000)
+    #: largest preview in pixels (width x height); larger sizes are a 422 problem
+    preview_max_pixels: int = Field(default=2048 * 2048, ge=16 * 16, le=4096 * 4096)
+    #: rendered previews kept in the API's memory (immutable, least recently used evicted first)
+    preview_cache_bytes: int = Field(default=32 * 1024 * 1024, ge=0)
+    #: per-token request rate (requests per second, token bucket); 0 turns rate limiting off
+    rate_limit_per_s: float = Field(default=0.0, ge=0.0)
+    #: requests a token may make at once above its rate (the bucket's size)
+    rate_limit_burst: int = Field(default=20, ge=1)
 
     @field_validator("storage_url")
     @classmethod

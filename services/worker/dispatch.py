@@ -55,9 +55,12 @@ class CeleryDispatcher(Dispatcher):
     def send(self, job_ids: Sequence[str]) -> None:
         from celery import group
 
+        headers = _request_headers()
         try:
             sig = [
-                self.app.signature("graspgen.run_job", args=(jid,), immutable=True).set(task_id=jid, queue=self.queue)
+                self.app.signature("graspgen.run_job", args=(jid,), immutable=True).set(
+                    task_id=jid, queue=self.queue, headers=headers
+                )
                 for jid in job_ids
             ]
             if len(sig) == 1:
@@ -96,19 +99,24 @@ class EmbeddedDispatcher(Dispatcher):
         self.db = db
 
     def send(self, job_ids: Sequence[str]) -> None:
+        headers = _request_headers()
         for jid in job_ids:
-            fut = self._pool.submit(self._run, jid)
+            fut = self._pool.submit(self._run, jid, headers)
             with self._lock:
                 self._futures[jid] = fut
 
-    def _run(self, jid: str) -> None:
+    def _run(self, jid: str, headers: dict[str, str] | None = None) -> None:
         try:
-            result = self._task.apply(args=(jid,), task_id=jid)
+            result = self._task.apply(args=(jid,), task_id=jid, headers=headers)
             if result.failed():
                 log.error("job %s: task raised %r", jid, result.result)
         finally:
             with self._lock:
                 self._futures.pop(jid, None)
+
+    def pending(self) -> int:
+        """Jobs waiting for a thread of the pool (the embedded mode's queue depth)."""
+        return self._pool._work_queue.qsize()  # noqa: SLF001 - no public count
 
     def revoke(self, job_ids: Sequence[str]) -> None:
         with self._lock:
@@ -149,6 +157,14 @@ class EmbeddedDispatcher(Dispatcher):
                     return True
             time.sleep(0.05)
         return False
+
+
+def _request_headers() -> dict[str, str] | None:
+    """The message headers that carry the current request's id to the job's worker (its log lines show it)."""
+    from services.common.logs import REQUEST_ID_MESSAGE_HEADER, request_id_var
+
+    rid = request_id_var.get()
+    return {REQUEST_ID_MESSAGE_HEADER: rid} if rid else None
 
 
 def make_dispatcher(settings: Settings, db: Database, storage) -> Dispatcher:  # type: ignore[no-untyped-def]

@@ -319,6 +319,7 @@ class JobRunner:
                 rr.TextDocument(json.dumps({"grasps": len(gs.grasps), "stats": gs.stats}, indent=2, default=str)),
                 static=True,
             )
+            progress._timed(None, time.monotonic())  # the export stage ends here
         finally:
             rec.flush()
             rec.disconnect()  # finalises the .rrd (footer) now rather than at garbage collection
@@ -540,6 +541,19 @@ class _Progress:
         self.last_stage: str | None = None
         self.last_write = 0.0
         self.value = 0.0
+        self.kind = inp.kind
+        self.stage: str | None = None  # for graspgen_job_stage_duration_seconds
+        self.stage_started = 0.0
+
+    def _timed(self, stage: str | None, now: float) -> None:
+        """Observe the wall time of the stage that ends now (a new one starts, or `stage` None: the run ends)."""
+        if stage == self.stage:
+            return
+        if self.stage is not None:
+            from services.common.metrics import STAGE_DURATION
+
+            STAGE_DURATION.labels(self.kind, self.stage).observe(now - self.stage_started)
+        self.stage, self.stage_started = stage, now
 
     def _overall(self, stage: str, fraction: float) -> float:
         if stage not in self.weights:
@@ -555,6 +569,7 @@ class _Progress:
         from graspgen.errors import Cancelled
 
         now = time.monotonic()
+        self._timed(stage, now)
         if now > self.deadline:
             raise _TimeLimitError()
         self.value = max(self.value, min(self._overall(stage, fraction), 0.99))

@@ -10,6 +10,7 @@ from celery import Task
 from celery.exceptions import TimeLimitExceeded
 from sqlalchemy.exc import OperationalError
 
+from services.common.logs import REQUEST_ID_MESSAGE_HEADER, log_context, valid_request_id
 from services.common.settings import Settings
 from services.worker.celery_app import celery_app
 from services.worker.runner import JobRunner
@@ -75,4 +76,8 @@ def run_job(self: Task, job_id: str) -> str:
     """
     req = self.request
     redelivered = bool(req.is_eager or req.retries or (req.delivery_info or {}).get("redelivered"))
-    return get_runner().run(job_id, redelivered=redelivered)
+    # the submitting request's id travels as a message header (services/worker/dispatch.py): every log line of the
+    # run carries it and the job id
+    request_id = getattr(req, REQUEST_ID_MESSAGE_HEADER, None) or (req.headers or {}).get(REQUEST_ID_MESSAGE_HEADER)
+    with log_context(request_id=valid_request_id(request_id), job_id=str(job_id)):
+        return get_runner().run(job_id, redelivered=redelivered)

@@ -1,7 +1,5 @@
 from __future__ import annotations
 
-import threading
-from collections import OrderedDict
 from datetime import datetime
 from typing import Annotated, Any
 
@@ -84,114 +82,7 @@ def get_grasp_set(request: Request, grasp_set_id: GraspSetId, principal: ReadDep
     return export_response(request, crud.export_ref(session, grasp_set_id), cache_control=IMMUTABLE)
 
 
-#: bump when the picture for the same grasp set and size changes (renderer changes): it is part of the ETag
-PREVIEW_REVISION = 1
-#: rendered previews kept in memory per app (the picture of an immutable grasp set never changes)
-PREVIEW_CACHE_BYTES = 32 * 1024 * 1024
-
-_PREVIEW_RESPONSE: dict[int | str, dict[str, Any]] = {
-    200: {
-        "description": "A PNG of the part (shaded, grey) with every exported gripper at its pose in its cluster's "
-        "colour, in four orthographic views (iso, front, side, top) in a 2 x 2 grid (graspgen.render)",
-        "content": {"image/png": {"schema": {"type": "string", "format": "binary"}}},
-        "headers": {
-            "ETag": {"description": "strong: from the grasp set id and the size", "schema": {"type": "string"}},
-            "Cache-Control": {"description": "immutable, like the grasp set", "schema": {"type": "string"}},
-        },
-    }
-}
-
-
-class _PreviewCache:
-    """PNG bytes by (grasp set id, width, height), least recently used evicted first."""
-
-    def __init__(self, max_bytes: int) -> None:
-        self.max_bytes = max_bytes
-        self._items: OrderedDict[tuple[int, int, int], bytes] = OrderedDict()
-        self._size = 0
-        self._lock = threading.Lock()
-
-    def get(self, key: tuple[int, int, int]) -> bytes | None:
-        with self._lock:
-            data = self._items.get(key)
-            if data is not None:
-                self._items.move_to_end(key)
-            return data
-
-    def put(self, key: tuple[int, int, int], data: bytes) -> None:
-        if len(data) > self.max_bytes:
-            return
-        with self._lock:
-            if key in self._items:
-                return
-            self._items[key] = data
-            self._size += len(data)
-            while self._size > self.max_bytes:
-                _, old = self._items.popitem(last=False)
-                self._size -= len(old)
-
-
-def _preview_cache(request: Request) -> _PreviewCache:
-    state = request.app.state
-    cache = getattr(state, "preview_cache", None)
-    if cache is None:
-        cache = state.preview_cache = _PreviewCache(PREVIEW_CACHE_BYTES)
-    return cache
-
-
-def _render_preview(ref: crud.PreviewRef, export: dict[str, Any], storage: Any, size: tuple[int, int]) -> bytes:
-    import trimesh
-
-    from graspgen.parts import load_part
-    from graspgen.render import render_grasp_set
-
-    try:
-        data = storage.get_bytes(ref.object_file_key)
-    except FileNotFoundError:
-        raise ApiError(503, "artifact-missing", "the object file is missing from storage") from None
-    part = load_part(data, units=ref.object_units, file_type=ref.object_format)
-    mesh = part.mesh if part.mesh is not None else trimesh.convex.convex_hull(part.points)
-    return render_grasp_set(mesh, export, size=size)
-
-
-@router.get(
-    "/grasp-sets/{grasp_set_id}/preview.png",
-    summary="A picture of a grasp set: the part and its grippers in four views (PNG, immutable, strong ETag)",
-    description="Drawn on the server without a GPU (graspgen.render). `size` is `WIDTHxHEIGHT` in pixels, each side "
-    "16..4096 (default 800x600); anything else is a 422 problem. The picture of a grasp set never changes, so "
-    "send the ETag back in If-None-Match for a 304.",
-    response_class=Response,
-    responses={**_PREVIEW_RESPONSE, **problems(304, 404, 422)},
-)
-def get_preview(
-    request: Request,
-    grasp_set_id: GraspSetId,
-    principal: ReadDep,
-    session: ReadSessionDep,
-    storage: StorageDep,
-    size: Annotated[
-        str | None, Query(max_length=20, description="WIDTHxHEIGHT in pixels", examples=["800x600"])
-    ] = None,
-) -> Response:
-    import json
-
-    from graspgen.render import DEFAULT_SIZE, parse_size
-
-    W, H = parse_size(size) if size is not None else DEFAULT_SIZE  # InvalidParameterError -> 422 problem
-    ref = crud.preview_ref(session, grasp_set_id)
-    etag = f'"preview-{PREVIEW_REVISION}-{ref.id}-{W}x{H}"'
-    if etag_matches(request, etag):
-        return not_modified(etag, IMMUTABLE)
-    cache = _preview_cache(request)
-    png = cache.get((ref.id, W, H))
-    if png is None:
-        try:
-            export = json.loads(request.app.state.export_cache.get(ref.export_key))
-        except FileNotFoundError:
-            raise ApiError(503, "artifact-missing", "the export is missing from storage") from None
-        png = _render_preview(ref, export, storage, (W, H))
-        cache.put((ref.id, W, H), png)
-    return Response(png, media_type="image/png", headers={"ETag": etag, "Cache-Control": IMMUTABLE})
+# GET /grasp-sets/{grasp_set_id}/preview.png lives in routers/previews.py (rendered off the request path)
 
 
 @router.get(

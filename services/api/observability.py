@@ -1,0 +1,156 @@
+"""Request ids, HTTP metrics, `GET /metrics` and the per-token rate limit of the API.
+
+`RequestContextMiddleware` wraps the whole application, error handling included, so every response (a 401, a 422, a
+500) carries `X-Request-ID`, every log line written while the request runs carries its id (services/common/logs.py),
+and every request is counted in `graspgen_http_request_duration_seconds` under its route template.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from typing import Any
+
+from fastapi import APIRouter, Request, Response
+from starlette.datastructures import Headers, MutableHeaders
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from services.common.logs import REQUEST_ID_HEADER, new_request_id, request_id_var, valid_request_id
+from services.common.metrics import CONTENT_TYPE_LATEST, HTTP_DURATION, QueueDepthCollector, render, scrape_registry
+
+from .deps import AdminDep
+from .problems import ApiError
+
+__all__ = ["RequestContextMiddleware", "TokenBuckets", "router", "install"]
+
+_METHODS = frozenset({"GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS"})
+
+
+class RequestContextMiddleware:
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        rid = valid_request_id(Headers(scope=scope).get(REQUEST_ID_HEADER)) or new_request_id()
+        scope.setdefault("state", {})["request_id"] = rid
+        token = request_id_var.set(rid)
+        status = 500  # what the server answers when the app raises before starting a response
+        started = time.perf_counter()
+
+        async def send_with_id(message: Message) -> None:
+            nonlocal status
+            if message["type"] == "http.response.start":
+                status = message["status"]
+                MutableHeaders(scope=message)[REQUEST_ID_HEADER] = rid
+            await send(message)
+
+        try:
+            await self.app(scope, receive, send_with_id)
+        finally:
+            route = scope.get("route")
+            # the template (/v1/jobs/{job_id}), never the raw path: one series per route, not per id
+            template = getattr(route, "path", None) or "unmatched"
+            method = scope.get("method", "GET")
+            HTTP_DURATION.labels(method if method in _METHODS else "other", template, str(status)).observe(
+                time.perf_counter() - started
+            )
+            request_id_var.reset(token)
+
+
+class TokenBuckets:
+    """A token bucket per bearer-token name: `rate` requests per second, up to `burst` at once."""
+
+    def __init__(self, rate: float, burst: int) -> None:
+        self.rate = rate
+        self.burst = float(burst)
+        self._buckets: dict[str, tuple[float, float]] = {}  # name -> (tokens, last refill, monotonic)
+        self._lock = threading.Lock()
+
+    def take(self, name: str) -> float:
+        """0 when the request may go ahead, else the seconds until it would."""
+        now = time.monotonic()
+        with self._lock:
+            tokens, last = self._buckets.get(name, (self.burst, now))
+            tokens = min(self.burst, tokens + (now - last) * self.rate)
+            if tokens >= 1.0:
+                self._buckets[name] = (tokens - 1.0, now)
+                return 0.0
+            self._buckets[name] = (tokens, now)
+            return (1.0 - tokens) / self.rate
+
+
+def check_rate(request: Request, name: str) -> None:
+    """Refuse the request with a 429 problem and Retry-After when the token is over its rate (when limits are on)."""
+    limiter: TokenBuckets | None = getattr(request.app.state, "rate_limiter", None)
+    if limiter is None:
+        return
+    wait = limiter.take(name)
+    if wait > 0:
+        from services.common.metrics import RATE_LIMITED
+
+        RATE_LIMITED.inc()
+        raise ApiError(
+            429,
+            "rate-limited",
+            f"this token makes more than {limiter.rate:g} requests per second; retry later",
+            title="Too many requests",
+            headers={"Retry-After": str(max(1, math.ceil(wait)))},
+        )
+
+
+router = APIRouter(tags=["health"])
+
+
+@router.get(
+    "/metrics",
+    summary="Prometheus metrics of this API process (scope admin)",
+    description="Text exposition format 0.0.4: HTTP request durations by route template and status, jobs by kind "
+    "and final state, stage durations, queue depth, export cache hits, previews, rate-limited requests. "
+    "`GRASPGEN_METRICS_PORT` offers the same without a token on a separate port.",
+    response_class=Response,
+    responses={200: {"content": {CONTENT_TYPE_LATEST: {"schema": {"type": "string"}}}}},
+)
+def get_metrics(request: Request, principal: AdminDep) -> Response:
+    return Response(render(request.app.state.metrics_registry), media_type=CONTENT_TYPE_LATEST)
+
+
+def install(app: Any, settings: Any, dispatcher: Any) -> None:
+    """Wire the request-id middleware (outside everything, error handling included), /metrics and the rate limit."""
+    app.state.metrics_registry = scrape_registry([QueueDepthCollector(queue_depth_reader(settings, dispatcher))])
+    app.state.rate_limiter = (
+        TokenBuckets(settings.rate_limit_per_s, settings.rate_limit_burst) if settings.rate_limit_per_s > 0 else None
+    )
+    app.include_router(router)
+    build = app.build_middleware_stack
+
+    def build_middleware_stack() -> ASGIApp:
+        # Starlette's ServerErrorMiddleware is always the outermost layer it builds; ours goes around it so that a
+        # 500 it answers carries the request id too
+        return RequestContextMiddleware(build())
+
+    app.build_middleware_stack = build_middleware_stack
+
+
+def queue_depth_reader(settings: Any, dispatcher: Any):  # type: ignore[no-untyped-def]
+    pending = getattr(dispatcher, "pending", None)
+    if callable(pending):
+        return pending
+    if settings.broker_url is not None and settings.broker_url.get_secret_value().startswith(("redis://", "rediss://")):
+        from services.common.metrics import redis_queue_depth
+
+        reader = None
+
+        def read() -> int:
+            nonlocal reader
+            if reader is None:
+                reader = redis_queue_depth(
+                    settings.broker_url.get_secret_value(), settings.queue, settings.broker_key_prefix
+                )
+            return reader()
+
+        return read
+    return lambda: None

@@ -1,0 +1,180 @@
+"""preview.png rendering off the request path: a small pool of render processes, a bounded wait, a PNG cache.
+
+Why processes: a render is seconds of numpy and numba work on large arrays. In the API's own threads it would hold the
+GIL against every other request and (before this module) a database connection for its whole duration; four clients
+asking for large previews stalled catalogue lookups for 30 s. Here:
+
+* the route reads what it needs from the database in a short session and closes it before anything is drawn;
+* renders run in `preview_workers` spawned processes at a lower CPU priority (nice 10), so lookups win the CPU;
+* at most `preview_queue` more wait; any further preview request is refused at once with a 503 problem and
+  `Retry-After` (the client retries later), never queued without bound;
+* identical requests in flight share one render; finished PNGs stay in an LRU cache (a grasp set never changes).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import os
+import threading
+from collections import OrderedDict
+from collections.abc import Callable
+from concurrent.futures import Future, ProcessPoolExecutor
+from typing import Any
+
+__all__ = ["PreviewCache", "PreviewRenderer", "PreviewsBusy", "render_png"]
+
+log = logging.getLogger(__name__)
+
+#: renders a process makes before it is replaced (numba, trimesh and numpy caches do not grow without bound)
+RENDERS_PER_PROCESS = 200
+#: nice increment of render processes: lookups in the API process are scheduled first on a busy host
+RENDER_NICE = 10
+
+
+class PreviewsBusy(Exception):  # noqa: N818 - a state, answered as a 503 problem
+    """Every render process is busy and the waiting line is full."""
+
+
+class PreviewCache:
+    """PNG bytes by (grasp set id, width, height), least recently used evicted first."""
+
+    def __init__(self, max_bytes: int) -> None:
+        self.max_bytes = max_bytes
+        self._items: OrderedDict[tuple[int, int, int], bytes] = OrderedDict()
+        self._size = 0
+        self._lock = threading.Lock()
+
+    def get(self, key: tuple[int, int, int]) -> bytes | None:
+        with self._lock:
+            data = self._items.get(key)
+            if data is not None:
+                self._items.move_to_end(key)
+            return data
+
+    def put(self, key: tuple[int, int, int], data: bytes) -> None:
+        if len(data) > self.max_bytes:
+            return
+        with self._lock:
+            if key in self._items:
+                return
+            self._items[key] = data
+            self._size += len(data)
+            while self._size > self.max_bytes:
+                _, old = self._items.popitem(last=False)
+                self._size -= len(old)
+
+
+def _init_render_process() -> None:
+    with contextlib.suppress(OSError):  # not permitted on some hosts; the bound on concurrency still holds
+        os.nice(RENDER_NICE)
+
+
+def render_png(
+    part_bytes: bytes, units: str, file_type: str, export_json: bytes, size: tuple[int, int]
+) -> bytes:  # pragma: no cover - runs in a render process (tested through the API)
+    """Draw one preview (runs in a render process): the part from its stored bytes, the export's grippers."""
+    import json
+
+    import trimesh
+
+    from graspgen.parts import load_part
+    from graspgen.render import render_grasp_set
+
+    part = load_part(part_bytes, units=units, file_type=file_type)
+    mesh = part.mesh if part.mesh is not None else trimesh.convex.convex_hull(part.points)
+    return render_grasp_set(mesh, json.loads(export_json), size=size)
+
+
+class PreviewRenderer:
+    """Runs `render_png` in a pool of spawned processes with a bounded number of renders in flight."""
+
+    def __init__(self, *, workers: int, queue: int) -> None:
+        self.workers = workers
+        self.capacity = workers + queue
+        self._pool: ProcessPoolExecutor | None = None
+        self._lock = threading.Lock()
+        self._in_flight: dict[Any, Future[bytes]] = {}
+
+    def _executor(self) -> ProcessPoolExecutor:
+        if self._pool is not None and getattr(self._pool, "_broken", False):
+            # a render process died (killed, out of memory): the pool refuses all work from then on, so start anew
+            log.warning("a preview render process died; starting a new pool")
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None
+        if self._pool is None:
+            import multiprocessing
+
+            # spawn: the API process has threads and an event loop that a fork would copy in a broken state
+            self._pool = ProcessPoolExecutor(
+                max_workers=self.workers,
+                mp_context=multiprocessing.get_context("spawn"),
+                initializer=_init_render_process,
+                max_tasks_per_child=RENDERS_PER_PROCESS,
+            )
+        return self._pool
+
+    @property
+    def in_flight(self) -> int:
+        with self._lock:
+            return len(self._in_flight)
+
+    def submit(self, key: Any, make_args: Callable[[], tuple[Any, ...]]) -> Future[bytes]:
+        """The render of `key`: the one already in flight, or a new one with `render_png(*make_args())`.
+
+        Raises PreviewsBusy when `capacity` renders are in flight. `make_args` runs in the caller's thread (it reads
+        the part and the export from storage; no database)."""
+        from services.common.metrics import PREVIEWS_IN_FLIGHT
+
+        with self._lock:
+            fut = self._in_flight.get(key)
+            if fut is not None:
+                return fut
+            if len(self._in_flight) >= self.capacity:
+                raise PreviewsBusy()
+            fut = Future()
+            self._in_flight[key] = fut
+            PREVIEWS_IN_FLIGHT.inc()
+
+        def done(_: Future[bytes]) -> None:
+            with self._lock:
+                self._in_flight.pop(key, None)
+            PREVIEWS_IN_FLIGHT.dec()
+
+        fut.add_done_callback(done)
+        try:
+            args = make_args()
+            with self._lock:
+                pool = self._executor()
+            inner = pool.submit(render_png, *args)
+        except BaseException as exc:
+            fut.set_exception(exc)
+            raise
+        _chain(inner, fut)
+        return fut
+
+    async def render(self, key: Any, make_args: Callable[[], tuple[Any, ...]]) -> bytes:
+        from starlette.concurrency import run_in_threadpool
+
+        fut = await run_in_threadpool(self.submit, key, make_args)
+        # shielded: a client that goes away does not free the slot of a render that is still running
+        return await asyncio.shield(asyncio.wrap_future(fut))
+
+    def close(self) -> None:
+        with self._lock:
+            pool, self._pool = self._pool, None
+        if pool is not None:
+            pool.shutdown(wait=False, cancel_futures=True)
+
+
+def _chain(inner: Future[bytes], outer: Future[bytes]) -> None:
+    def copy(f: Future[bytes]) -> None:
+        if f.cancelled():
+            outer.cancel()
+        elif f.exception() is not None:
+            outer.set_exception(f.exception())  # type: ignore[arg-type]
+        else:
+            outer.set_result(f.result())
+
+    inner.add_done_callback(copy)
