@@ -1,7 +1,8 @@
 """Job bookkeeping shared by the API (submission, cancellation, views) and the worker (claim, result, failure).
 
 States: queued -> running -> succeeded | failed | cancelled. A bulk job is a parent whose state and progress are the
-aggregate of its child jobs; one failed child fails alone.
+aggregate of its child jobs; one failed child fails alone, but the parent then ends `failed` (never `succeeded` unless
+every item succeeded) with an error that counts the failed items.
 """
 
 from __future__ import annotations
@@ -87,13 +88,27 @@ class Aggregate:
         return sum(self.counts.get(s, 0) for s in TERMINAL_STATES)
 
     def state(self, *, cancel_requested: bool) -> str:
+        """succeeded only when every item succeeded; cancelled when the parent was cancelled or items were cancelled
+        and none failed; failed when any item failed."""
         if self.total and self.done == self.total:
-            if cancel_requested and self.counts.get("succeeded", 0) < self.total:
+            if self.counts.get("succeeded", 0) == self.total:
+                return "succeeded"
+            if cancel_requested or not self.counts.get("failed", 0):
                 return "cancelled"
-            return "succeeded" if self.counts.get("succeeded", 0) else "failed"
+            return "failed"
         if self.counts.get("queued", 0) == self.total:
             return "queued"
         return "running"
+
+    def error(self) -> dict[str, Any] | None:
+        """The parent's problem once it ended other than succeeded: how many items failed (or were cancelled)."""
+        failed, cancelled = self.counts.get("failed", 0), self.counts.get("cancelled", 0)
+        if not self.total or self.done < self.total or not (failed or cancelled):
+            return None
+        parts = [f"{n} of {self.total} items {what}" for n, what in ((failed, "failed"), (cancelled, "cancelled")) if n]
+        code, title = ("items-failed", "Some items failed") if failed else ("items-cancelled", "Items were cancelled")
+        counts = {s: self.counts.get(s, 0) for s in ("succeeded", "failed", "cancelled")}
+        return problem(code, title, "; ".join(parts), counts={**counts, "total": self.total})
 
 
 def aggregate_children(session: Session, parent_id: uuid.UUID) -> Aggregate:
@@ -118,6 +133,7 @@ def refresh_parent(session: Session, parent_id: uuid.UUID) -> None:
     parent.stage = f"{agg.done}/{agg.total} items done"
     if state in TERMINAL_STATES and parent.state not in TERMINAL_STATES:
         parent.state = state
+        parent.error = agg.error()
         parent.finished_at = utcnow()
     elif state not in TERMINAL_STATES:
         if parent.state == "queued" and state == "running":

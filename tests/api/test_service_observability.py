@@ -157,3 +157,28 @@ def test_rate_limit_per_token_answers_429_with_retry_after(limited_service):
 def test_rate_limit_is_off_by_default(pg_service):
     assert pg_service.app.state.rate_limiter is None
     assert all(pg_service.get("/v1/objects").status_code == 200 for _ in range(40))
+
+
+def test_the_request_id_is_stored_on_the_job_it_submitted(pg_service):
+    import uuid
+
+    from services.common.models import Job
+
+    obj, grip = slug("rid"), slug("grip")
+    assert pg_service.upload(obj, box_stl()).status_code == 201
+    assert pg_service.post("/v1/grippers", json={**GRIPPER, "name": grip}).status_code == 201
+    r = pg_service.post(
+        "/v1/jobs",
+        json={"object": obj, "gripper": grip, "params": {"points": 500}},
+        headers={"X-Request-ID": "plant-7-submit-42"},
+    )
+    assert r.status_code == 202 and r.headers["x-request-id"] == "plant-7-submit-42"
+    bulk = pg_service.post("/v1/bulk-jobs", json={"items": [{"object": obj, "gripper": grip}]})
+    with pg_service.app.state.db.session() as s:
+        assert s.get(Job, uuid.UUID(r.json()["id"])).request_id == "plant-7-submit-42"
+        parent = s.get(Job, uuid.UUID(bulk.json()["id"]))
+        children = s.query(Job).filter(Job.parent_id == parent.id).all()
+        assert parent.request_id == bulk.headers["x-request-id"]
+        assert [c.request_id for c in children] == [bulk.headers["x-request-id"]]
+    for jid in (r.json()["id"], bulk.json()["id"]):
+        pg_service.post(f"/v1/jobs/{jid}/cancel")

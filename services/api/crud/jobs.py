@@ -17,6 +17,7 @@ from sqlalchemy.orm import Session
 from graspgen.errors import GraspgenError, InvalidParameterError
 from graspgen.params import Params
 from services.common import jobs as J  # noqa: N812 - short name for the shared job helpers
+from services.common.logs import request_id_var
 from services.common.models import (
     TERMINAL_STATES,
     GraspSet,
@@ -198,6 +199,7 @@ def submit_job(
         idempotency_key=idempotency_key,
         request_sha256=request_sha,
         created_by=principal.name,
+        request_id=request_id_var.get(),  # X-Request-ID of this request: logs tie the job to it
         **resolved,
     )
     session.add(job)
@@ -237,6 +239,7 @@ def submit_bulk(
         idempotency_key=idempotency_key,
         request_sha256=request_sha,
         created_by=principal.name,
+        request_id=request_id_var.get(),
     )
     session.add(parent)
     session.flush()
@@ -250,6 +253,7 @@ def submit_bulk(
             parent_id=parent.id,
             item_index=i,
             created_by=principal.name,
+            request_id=request_id_var.get(),
         )
         try:
             for k, v in _resolve_generate(session, item).items():
