@@ -9,8 +9,8 @@ import pytest
 from services_conftest import (
     GRIPPER,
     PG_URL,
-    broker_settings,
     box_stl,
+    broker_settings,
     redis_cleanup,
     seed_grasp_sets,
     slug,
