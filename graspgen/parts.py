@@ -38,6 +38,7 @@ from scipy.spatial import cKDTree
 from trimesh.exchange.ply import load_ply
 
 from .errors import InvalidMeshError
+from .limits import MAX_DECODED_BYTES, check_declared, read_npz
 from .units import UNIT_SCALE, extents_under_each_unit, to_metres, to_metres_scale
 
 __all__ = [
@@ -109,16 +110,18 @@ def load_part(
     units: str,
     name: str | None = None,
     file_type: str | None = None,
+    max_decoded_bytes: int = MAX_DECODED_BYTES,
 ) -> Part:
     """Load a mesh or point cloud given in `units` and return it as a checked `Part` in metres.
 
     `source` is a path, an in-memory `trimesh.Trimesh`, or the bytes of a file (then `file_type` is required:
     one of stl, obj, ply, off, glb, npz). Raises `InvalidUnitsError` for missing/unknown units and
-    `InvalidMeshError` for anything wrong with the geometry.
+    `InvalidMeshError` for anything wrong with the geometry, and for a file that declares more than
+    `max_decoded_bytes` of decoded arrays (checked before anything is inflated: `graspgen.limits`).
     """
     scale = to_metres_scale(units)
     source_units = str(units).strip().lower()
-    raw = _read_raw(source, file_type=file_type)
+    raw = _read_raw(source, file_type=file_type, max_decoded_bytes=max_decoded_bytes)
     _check_finite(raw)
     _check_plausible_size(raw, scale, source_units)
     part_name = name if name is not None else _slug(raw.stem)
@@ -127,12 +130,14 @@ def load_part(
     return _mesh_part(raw, scale, part_name, source_units)
 
 
-def read_raw_extents(path: str | os.PathLike | bytes, *, file_type: str | None = None) -> np.ndarray:
+def read_raw_extents(
+    path: str | os.PathLike | bytes, *, file_type: str | None = None, max_decoded_bytes: int = MAX_DECODED_BYTES
+) -> np.ndarray:
     """Axis-aligned extents (3,) float64 in the file's own units, for the CLI's "which unit?" message.
 
     Raises `InvalidMeshError` when the file cannot be read or holds no usable geometry.
     """
-    raw = _read_raw(path, file_type=file_type)
+    raw = _read_raw(path, file_type=file_type, max_decoded_bytes=max_decoded_bytes)
     _check_finite(raw)
     return _extents(_used_vertices(raw))
 
@@ -140,7 +145,9 @@ def read_raw_extents(path: str | os.PathLike | bytes, *, file_type: str | None =
 # ----------------------------------------------------------------------------------------------- reading
 
 
-def _read_raw(source: str | os.PathLike | trimesh.Trimesh | bytes, *, file_type: str | None) -> _Raw:
+def _read_raw(
+    source: str | os.PathLike | trimesh.Trimesh | bytes, *, file_type: str | None, max_decoded_bytes: int
+) -> _Raw:
     if isinstance(source, trimesh.Trimesh):
         data = trimesh.exchange.stl.export_stl(source)
         vertices = np.array(source.vertices, dtype=np.float64)
@@ -176,8 +183,10 @@ def _read_raw(source: str | os.PathLike | trimesh.Trimesh | bytes, *, file_type:
     sha = hashlib.sha256(data).hexdigest()
     if not data:
         raise InvalidMeshError(f"{label} is empty (0 bytes): upload or export the file again", field="file")
+    # declared sizes first: nothing is inflated or allocated for a file that declares more than the limit
+    check_declared(data, ft, label, max_decoded_bytes)
     if ft == "npz":
-        vertices, normals = _read_npz(data, label)
+        vertices, normals = _read_npz(data, label, max_decoded_bytes)
         return _Raw(label, stem, sha, vertices, None, normals)
     if ft == "ply":
         return _read_ply(data, label, stem, sha)
@@ -196,7 +205,9 @@ def _normalise_type(file_type: str, label: str) -> str:
 
 def _read_mesh(data: bytes, ft: str, label: str) -> tuple[np.ndarray, np.ndarray]:
     try:
-        loaded = trimesh.load(io.BytesIO(data), file_type=ft, process=False)
+        # materials (textures: PNG/JPEG that PIL would decode) are never used, so never decoded
+        extra = {"skip_materials": True} if ft == "glb" else {}
+        loaded = trimesh.load(io.BytesIO(data), file_type=ft, process=False, **extra)
     except ImportError:
         raise  # a broken installation is our problem, not the user's
     except IndexError as exc:  # trimesh's OBJ/OFF readers index the vertices with the faces as given
@@ -258,20 +269,8 @@ def _read_ply(data: bytes, label: str, stem: str, sha: str) -> _Raw:
     return _Raw(label, stem, sha, vertices, None, normals)
 
 
-def _read_npz(data: bytes, label: str) -> tuple[np.ndarray, np.ndarray | None]:
-    try:
-        with np.load(io.BytesIO(data), allow_pickle=False) as npz:
-            arrays = {k: npz[k] for k in npz.files}
-    except Exception as exc:
-        raise InvalidMeshError(
-            f"{label} is not a readable NPZ archive ({type(exc).__name__}: {exc})", field="file"
-        ) from exc
-    if "points" not in arrays:
-        raise InvalidMeshError(
-            f"{label} has no 'points' array (found: {', '.join(arrays) or 'nothing'}): "
-            "save the cloud as points=(n, 3) and optionally normals=(n, 3)",
-            field="file",
-        )
+def _read_npz(data: bytes, label: str, max_decoded_bytes: int) -> tuple[np.ndarray, np.ndarray | None]:
+    arrays = read_npz(data, label, max_decoded_bytes)  # bounded: never inflates more than a member declares
     points = arrays["points"]
     if points.ndim != 2 or points.shape[1] != 3 or points.shape[0] == 0 or not np.issubdtype(points.dtype, np.number):
         raise InvalidMeshError(f"{label}: 'points' must be a non-empty (n, 3) numeric array, got {points.shape}")

@@ -93,6 +93,141 @@ def png_bytes() -> bytes:
     return buf.getvalue()
 
 
+# -- hostile files (issue 16): they declare far more than they hold, or inflate far beyond their size ---------------
+def npy_header(shape: tuple[int, ...], dtype: str = "<f8") -> bytes:
+    """A version 1.0 .npy header (magic, length, dict padded to a multiple of 64 bytes)."""
+    d = repr({"descr": dtype, "fortran_order": False, "shape": tuple(shape)}).encode()
+    pad = 64 - (10 + len(d) + 1) % 64
+    body = d + b" " * pad + b"\n"
+    return b"\x93NUMPY\x01\x00" + struct.pack("<H", len(body)) + body
+
+
+def _zip_one(name: str, payload_deflated: bytes, size: int, crc: int) -> bytes:
+    """A zip archive of one deflated member, written by hand so that its declared size can be anything."""
+    fname = name.encode()
+    local = struct.pack("<IHHHHHIIIHH", 0x04034B50, 20, 0, 8, 0, 0, crc, len(payload_deflated), size, len(fname), 0)
+    central = struct.pack(
+        "<IHHHHHHIIIHHHHHII", 0x02014B50, 20, 20, 0, 8, 0, 0, crc, len(payload_deflated), size, len(fname), 0, 0, 0, 0,
+        0, 0,
+    )  # fmt: skip
+    cd = central + fname
+    offset = len(local) + len(fname) + len(payload_deflated)
+    end = struct.pack("<IHHHHIIH", 0x06054B50, 0, 0, 1, 1, len(cd), offset, 0)
+    return local + fname + payload_deflated + cd + end
+
+
+def npz_zero_bomb(inflated: int) -> bytes:
+    """An NPZ whose `points` member (float64 zeros, (inflated // 24, 3)) deflates about 1000:1: 1 GiB in ~1 MB.
+
+    The zeros are one deflate block of 1 MiB repeated (a full flush makes each copy independent), so building a
+    1 GiB bomb takes a second, not a minute; the CRC is the true one.
+    """
+    import zlib
+
+    rows = inflated // 24
+    header = npy_header((rows, 3))
+    comp = zlib.compressobj(9, zlib.DEFLATED, -15)
+    head = comp.compress(header) + comp.flush(zlib.Z_FULL_FLUSH)
+    mib = comp.compress(bytes(1 << 20)) + comp.flush(zlib.Z_FULL_FLUSH)
+    n_bytes = rows * 24
+    whole, rest = divmod(n_bytes, 1 << 20)
+    tail = comp.compress(bytes(rest)) + comp.flush(zlib.Z_FINISH)
+    crc = zlib.crc32(header)
+    zero = bytes(1 << 20)
+    for _ in range(whole):
+        crc = zlib.crc32(zero, crc)
+    crc = zlib.crc32(bytes(rest), crc)
+    return _zip_one("points.npy", head + mib * whole + tail, len(header) + n_bytes, crc)
+
+
+def npz_forged_shape(rows: int) -> bytes:
+    """An NPZ whose `points` header and zip entry declare `rows` x 3 float64 over a few bytes of deflate."""
+    import zlib
+
+    header = npy_header((rows, 3))
+    comp = zlib.compressobj(9, zlib.DEFLATED, -15)
+    payload = comp.compress(header + bytes(240)) + comp.flush()
+    return _zip_one("points.npy", payload, len(header) + 24 * rows, 0)
+
+
+def npz_lying_member(inflated: int) -> bytes:
+    """An NPZ whose `points` entry declares 10 x 3 float64 (368 bytes) but whose deflate stream holds `inflated`."""
+    import zlib
+
+    header = npy_header((10, 3))
+    comp = zlib.compressobj(9, zlib.DEFLATED, -15)
+    payload = comp.compress(header) + comp.compress(bytes(inflated)) + comp.flush()
+    # the CRC is that of the whole stream, as a writer that lied about the size only would leave it
+    return _zip_one("points.npy", payload, len(header) + 240, zlib.crc32(bytes(inflated), zlib.crc32(header)))
+
+
+def npz_object_array() -> bytes:
+    """An NPZ whose `points` is a pickled object array (np.load with allow_pickle would run code)."""
+    import numpy as np
+
+    buf = io.BytesIO()
+    np.savez(buf, points=np.array([[0.0, 1.0, 2.0], "x"], dtype=object))
+    return buf.getvalue()
+
+
+def ply_declaring(vertices: int, faces: int, *, binary: bool) -> bytes:
+    fmt = "binary_little_endian" if binary else "ascii"
+    head = (
+        f"ply\nformat {fmt} 1.0\nelement vertex {vertices}\nproperty float x\nproperty float y\nproperty float z\n"
+        f"element face {faces}\nproperty list uchar int vertex_indices\nend_header\n"
+    ).encode()
+    if binary:
+        return head + struct.pack("<9f", 0, 0, 0, 30, 0, 0, 0, 30, 0) + struct.pack("<B3i", 3, 0, 1, 2)
+    return head + b"0 0 0\n30 0 0\n0 30 0\n3 0 1 2\n"
+
+
+def glb(tree: dict[str, Any], binary: bytes = b"") -> bytes:
+    js = json.dumps(tree).encode()
+    js += b" " * (-len(js) % 4)
+    binary += b"\0" * (-len(binary) % 4)
+    chunks = struct.pack("<II", len(js), 0x4E4F534A) + js
+    if binary:
+        chunks += struct.pack("<II", len(binary), 0x004E4942) + binary
+    return b"glTF" + struct.pack("<II", 2, 12 + len(chunks)) + chunks
+
+
+def glb_bufferless_accessor(count: int) -> bytes:
+    """A GLB whose position accessor has `count` items and no buffer view: trimesh would allocate zeros for all."""
+    tree = {
+        "asset": {"version": "2.0"},
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "mode": 4}]}],
+        "accessors": [{"componentType": 5126, "count": count, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 1]}],
+    }
+    return glb(tree)
+
+
+def glb_draco() -> bytes:
+    """A GLB that requires KHR_draco_mesh_compression (its decoded size is not known before decoding)."""
+    tree = {
+        "asset": {"version": "2.0"},
+        "extensionsUsed": ["KHR_draco_mesh_compression"],
+        "extensionsRequired": ["KHR_draco_mesh_compression"],
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "buffers": [{"byteLength": 16}],
+        "bufferViews": [{"buffer": 0, "byteLength": 16}],
+        "meshes": [
+            {
+                "primitives": [
+                    {
+                        "attributes": {"POSITION": 0},
+                        "extensions": {"KHR_draco_mesh_compression": {"bufferView": 0, "attributes": {"POSITION": 0}}},
+                    }
+                ]
+            }
+        ],
+        "accessors": [{"componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 1]}],
+    }
+    return glb(tree, bytes(16))
+
+
 def _mesh_files() -> dict[str, bytes]:
     box_v, box_f = _box(40.0, 30.0, 20.0)  # millimetres
     good = binary_stl(box_v, box_f)
@@ -123,6 +258,15 @@ def _mesh_files() -> dict[str, bytes]:
         "box_5m_drawn_in_mm.stl": binary_stl(*_box(5000.0, 3000.0, 2000.0)),
         "box_50um.stl": binary_stl(*_box(5.0e-5, 4.0e-5, 3.0e-5)),
         "unknown_extension.xyz": good,
+        # hostile (issue 16): each declares at least 1 GiB decoded in a file of a few hundred bytes
+        "bomb_npz_forged_shape.npz": npz_forged_shape(50_000_000),
+        "bomb_npz_lying_member.npz": npz_lying_member(64 << 20),
+        "bomb_npz_object_array.npz": npz_object_array(),
+        "bomb_ply_binary_billion_vertices.ply": ply_declaring(1_000_000_000, 1, binary=True),
+        "bomb_ply_ascii_forged_counts.ply": ply_declaring(2_000_000, 1_000_000, binary=False),
+        "bomb_glb_bufferless_accessor.glb": glb_bufferless_accessor(400_000_000),
+        "bomb_glb_draco.glb": glb_draco(),
+        "bomb_off_billion_vertices.off": b"OFF\n1000000000 1 0\n0 0 0\n30 0 0\n0 30 0\n3 0 1 2\n",
     }
 
 
@@ -163,6 +307,15 @@ MESH_CASES = [
     _mesh("mesh-units-missing", "good_box_mm.stl", None, "validation-error", "units"),
     _mesh("mesh-units-unknown", "good_box_mm.stl", "furlong", "invalid-units", "furlong"),
     _mesh("mesh-open-surface", "open_tetrahedron.obj", "mm", "", "not watertight", expect="warn"),
+    # hostile input (issue 16): refused from the declared sizes, before anything is inflated
+    _mesh("bomb-npz-forged-shape", "bomb_npz_forged_shape.npz", "mm", "invalid-mesh", "declares", "limit"),
+    _mesh("bomb-npz-lying-member", "bomb_npz_lying_member.npz", "mm", "invalid-mesh", "npz", "crc"),
+    _mesh("bomb-npz-object-array", "bomb_npz_object_array.npz", "mm", "invalid-mesh", "objects"),
+    _mesh("bomb-ply-binary-billion", "bomb_ply_binary_billion_vertices.ply", "mm", "invalid-mesh", "declares", "limit"),
+    _mesh("bomb-ply-ascii-forged", "bomb_ply_ascii_forged_counts.ply", "mm", "invalid-mesh", "truncated or forged"),
+    _mesh("bomb-glb-bufferless", "bomb_glb_bufferless_accessor.glb", "mm", "invalid-mesh", "declares", "limit"),
+    _mesh("bomb-glb-draco", "bomb_glb_draco.glb", "mm", "invalid-mesh", "draco", "not accepted"),
+    _mesh("bomb-off-billion", "bomb_off_billion_vertices.off", "mm", "invalid-mesh", "declares", "limit"),
 ]
 
 
