@@ -376,10 +376,13 @@ def seed_grasp_sets(
             )
             for v in range(have + 1, have + (version_of or {}).get(name, 1) + 1):
                 params = {"points": 1000 + v, "seed": v}
-                export = {
+                export = {  # a grasp_set/1 document without grasps (the OpenAPI schema GraspSetExport)
                     "format": "graspgen.grasp_set/1",
+                    "units": "m",
                     "object": {"name": name, "version": 1},
+                    "gripper": gv.spec,
                     "params": params,
+                    "stats": {"candidates": 0},
                     "grasps": [],
                 }
                 blob = state.storage.put_bytes(json.dumps(export).encode())

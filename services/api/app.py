@@ -8,6 +8,7 @@ from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 from fastapi.openapi.utils import get_openapi
+from fastapi.routing import APIRoute
 
 from services.common.db import Database, redacted_url
 from services.common.settings import Settings, get_settings
@@ -18,8 +19,9 @@ from services.worker.dispatch import Dispatcher, EmbeddedDispatcher, make_dispat
 from . import observability
 from .http import BlobCache
 from .limits import MULTIPART_OVERHEAD, BodyLimitMiddleware
+from .openapi_docs import document_contract
 from .problems import install_problem_handlers, problem_schema
-from .routers import grasp_sets, grippers, health, jobs, objects, previews
+from .routers import grasp_sets, grippers, health, jobs, objects, pick, previews
 
 __all__ = ["create_app"]
 
@@ -68,12 +70,14 @@ def create_app(
         version="1",
         description=DESCRIPTION,
         lifespan=lifespan,
+        generate_unique_id_function=operation_id,
         openapi_tags=[
             {"name": "objects", "description": "Parts, versioned by content"},
             {"name": "grippers", "description": "Gripper specs, versioned"},
             {"name": "jobs", "description": "Asynchronous generate, cluster and bulk jobs"},
             {"name": "grasp sets", "description": "Immutable grasp-set versions and their artifacts"},
             {"name": "catalogue", "description": "Newest grasp sets per object and gripper, for fleets"},
+            {"name": "pick", "description": "World-frame grasps for a part where it lies (docs/API.md)"},
             {"name": "health", "description": "Liveness and readiness"},
         ],
     )
@@ -84,7 +88,15 @@ def create_app(
     app.state.export_cache = BlobCache(storage, settings.export_cache_bytes)
     app.state.dispatcher = dispatcher
     install_problem_handlers(app)
-    for r in (objects.router, grippers.router, jobs.router, grasp_sets.router, previews.router, health.router):
+    for r in (
+        objects.router,
+        grippers.router,
+        jobs.router,
+        grasp_sets.router,
+        previews.router,
+        pick.router,
+        health.router,
+    ):
         app.include_router(r)
     previews.install(app, settings)
     observability.install(app, settings, dispatcher)  # request ids, /metrics, rate limits (issue 16)
@@ -104,8 +116,16 @@ def create_app(
                 tags=app.openapi_tags,
             )
             schema.setdefault("components", {}).setdefault("schemas", {})["Problem"] = problem_schema()
+            document_contract(schema)
             app.openapi_schema = schema
         return app.openapi_schema
 
     app.openapi = openapi  # type: ignore[method-assign]
     return app
+
+
+def operation_id(route: APIRoute) -> str:
+    """Readable operation ids for generated clients: the route function's name in camelCase (`get_object` ->
+    `getObject`); function names are unique across the routers."""
+    head, *rest = route.name.split("_")
+    return head + "".join(w[:1].upper() + w[1:] for w in rest)

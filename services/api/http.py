@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import threading
-from collections import OrderedDict
-
 from fastapi import Request, Response
 from fastapi.responses import StreamingResponse
 
 from services.common.storage import Storage
 
+from .cache import SizedLRU
 from .problems import ApiError
 
 __all__ = ["BlobCache", "IMMUTABLE", "REVALIDATE", "not_modified", "etag_matches", "blob_response", "blob_etag"]
@@ -69,27 +67,14 @@ class BlobCache:
     def __init__(self, storage: Storage, max_bytes: int) -> None:
         self.storage = storage
         self.max_bytes = max_bytes
-        self._items: OrderedDict[str, bytes] = OrderedDict()
-        self._size = 0
-        self._lock = threading.Lock()
+        self._lru: SizedLRU[bytes] = SizedLRU(max_bytes)
 
     def get(self, key: str) -> bytes:
         from services.common.metrics import EXPORT_CACHE
 
-        with self._lock:
-            data = self._items.get(key)
-            if data is not None:
-                self._items.move_to_end(key)
+        data = self._lru.get(key)
         EXPORT_CACHE.labels("miss" if data is None else "hit").inc()
-        if data is not None:
-            return data
-        data = self.storage.get_bytes(key)
-        if len(data) <= self.max_bytes:
-            with self._lock:
-                if key not in self._items:
-                    self._items[key] = data
-                    self._size += len(data)
-                    while self._size > self.max_bytes:
-                        _, old = self._items.popitem(last=False)
-                        self._size -= len(old)
+        if data is None:
+            data = self.storage.get_bytes(key)
+            self._lru.put(key, data, len(data))
         return data

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import uuid
 from datetime import datetime
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, WithJsonSchema, model_validator
 
 from graspgen.examples import EXAMPLE_GRIPPER
 from graspgen.gripper import SLUG_PATTERN
@@ -86,6 +86,10 @@ class ObjectPage(Page):
 
 
 # -- grippers ---------------------------------------------------------------------------------------------------------
+#: documented by contract_schemas.GripperSpec; stored specs are GripperSpec.to_dict() of graspgen's validated spec
+_SPEC_DOC = WithJsonSchema({"allOf": [{"$ref": "#/components/schemas/GripperSpec"}]})
+
+
 class GripperVersionOut(BaseModel):
     model_config = ConfigDict(
         json_schema_extra={
@@ -100,7 +104,7 @@ class GripperVersionOut(BaseModel):
     )
     name: str
     version: int
-    spec: dict[str, Any]
+    spec: Annotated[dict[str, Any], _SPEC_DOC]
     created_at: datetime
     links: dict[str, str]
 
@@ -110,7 +114,7 @@ class GripperOut(BaseModel):
     latest_version: int
     created_at: datetime
     updated_at: datetime
-    spec: dict[str, Any] = Field(description="the latest version's spec")
+    spec: Annotated[dict[str, Any], _SPEC_DOC] = Field(description="the latest version's spec")
     versions: list[GripperVersionOut]
     links: dict[str, str]
 
@@ -150,6 +154,10 @@ class _NoNul(BaseModel):
 
 
 # -- jobs -------------------------------------------------------------------------------------------------------------
+#: job params are documented by contract_schemas.JobParams and validated by graspgen's Params (one set of messages)
+_PARAMS_DOC = WithJsonSchema({"anyOf": [{"$ref": "#/components/schemas/JobParams"}, {"type": "null"}]})
+
+
 class JobRequest(_NoNul):
     model_config = ConfigDict(
         extra="forbid",
@@ -173,7 +181,7 @@ class JobRequest(_NoNul):
     grasp_set: int | None = Field(
         None, ge=1, le=ID_MAX, description="cluster: the grasp set whose candidates are re-clustered"
     )
-    params: dict[str, Any] | None = Field(
+    params: Annotated[dict[str, Any] | None, _PARAMS_DOC] = Field(
         None,
         description="generate: any of points, friction, safety_factor, rolls, k1, k2, inside, collision, seed; "
         "cluster: k1, k2, seed. Both: validate (bool, simulate every exported grasp in MuJoCo and repair failures), "
@@ -191,7 +199,7 @@ class BulkItem(_NoNul):
     object_version: int | None = Field(None, ge=1, le=ID_MAX)
     gripper: str = Field(max_length=200)
     gripper_version: int | None = Field(None, ge=1, le=ID_MAX)
-    params: dict[str, Any] | None = None
+    params: Annotated[dict[str, Any] | None, _PARAMS_DOC] = None
 
 
 class BulkRequest(BaseModel):

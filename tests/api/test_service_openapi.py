@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 from fastapi.testclient import TestClient
 from services_conftest import write_tokens_file
@@ -29,6 +31,7 @@ CONTRACT_ROUTES = {
     ("get", "/v1/grasp-sets/{grasp_set_id}/recording"),
     ("get", "/v1/catalogue/{object}/{gripper}"),
     ("get", "/v1/catalogue"),
+    ("post", "/v1/pick"),
     ("get", "/healthz"),
     ("get", "/readyz"),
 }
@@ -68,3 +71,154 @@ def test_bodies_and_payloads_carry_examples(schema):
     job_body = schema["paths"]["/v1/jobs"]["post"]["requestBody"]["content"]["application/json"]["schema"]
     assert job_body["$ref"].endswith("JobRequest")
     assert schema["components"]["schemas"]["JobRequest"]["examples"]
+
+
+def test_operation_ids_are_readable_and_unique(schema):
+    ids = [op["operationId"] for ops in schema["paths"].values() for op in ops.values()]
+    assert len(ids) == len(set(ids))
+    for op_id in ids:
+        assert re.fullmatch(r"[a-z][a-zA-Z0-9]*", op_id) and len(op_id) <= 40, op_id
+    by_route = {(m, p): op["operationId"] for p, ops in schema["paths"].items() for m, op in ops.items()}
+    assert by_route[("get", "/v1/objects/{name}")] == "getObject"
+    assert by_route[("get", "/v1/objects")] == "listObjects"
+    assert by_route[("post", "/v1/jobs")] == "submitJob"
+    assert by_route[("post", "/v1/pick")] == "pick"
+
+
+def test_every_error_response_is_a_problem_document(schema):
+    assert "HTTPValidationError" not in schema["components"]["schemas"]
+    for path, ops in schema["paths"].items():
+        for method, op in ops.items():
+            for code, response in op["responses"].items():
+                if code[0] in "45":
+                    content = response.get("content", {})
+                    assert list(content) == ["application/problem+json"], (method, path, code)
+                    assert content["application/problem+json"]["schema"] == {"$ref": "#/components/schemas/Problem"}
+
+
+def test_contract_payloads_are_typed_with_units_and_examples(schema):
+    components = schema["components"]["schemas"]
+    spec = components["GripperSpec"]
+    assert spec["additionalProperties"] is False and "grip_force" in spec["properties"]
+    assert "m" in spec["properties"]["stroke"]["description"] and spec["examples"]
+    assert "N" in spec["properties"]["grip_force"]["description"]
+    params = components["JobParams"]["properties"]
+    for name in (
+        "points",
+        "friction",
+        "safety_factor",
+        "rolls",
+        "k1",
+        "k2",
+        "inside",
+        "collision",
+        "seed",
+        "mass_kg",
+        "density",
+        "accel",
+        "hold",
+        "position_tolerance",
+        "select",
+        "validate",
+    ):
+        assert name in params, name
+    export = components["GraspSetExport"]
+    assert export["properties"]["format"]["const"] == "graspgen.grasp_set/1"
+    assert components["ExportGrasp"]["additionalProperties"] is True  # new library fields pass through
+    gripper_body = schema["paths"]["/v1/grippers"]["post"]["requestBody"]["content"]["application/json"]["schema"]
+    assert gripper_body["allOf"] == [{"$ref": "#/components/schemas/GripperSpec"}]
+    job_params = components["JobRequest"]["properties"]["params"]
+    assert {"$ref": "#/components/schemas/JobParams"} in job_params["anyOf"]
+    for path in ("/v1/grasp-sets/{grasp_set_id}", "/v1/catalogue/{object}/{gripper}"):
+        ok = schema["paths"][path]["get"]["responses"]["200"]["content"]["application/json"]
+        assert ok["schema"] == {"$ref": "#/components/schemas/GraspSetExport"}
+    pick = schema["paths"]["/v1/pick"]["post"]
+    assert pick["requestBody"]["content"]["application/json"]["schema"]["$ref"].endswith("PickRequest")
+    assert pick["responses"]["200"]["content"]["application/json"]["schema"]["$ref"].endswith("PickResponse")
+    grasp = components["PickedGrasp"]["properties"]
+    assert {"T_world_grasp", "quaternion_xyzw", "T_world_pregrasp", "T_world_flange", "approach_angle_deg"} <= set(
+        grasp
+    )
+    assert components["PickRequest"]["examples"]
+
+
+GRIPPER_CASES = [
+    {},
+    {"stroke": 0.0},
+    {"stroke": 3.0},
+    {"finger_width": -0.01},
+    {"palm_depth": None},
+    {"min_width": None},
+    {"palm_width": None},
+    {"grip_force": 20.0},
+    {"grip_force": 0.0},
+    {"friction": 0.0},
+    {"pregrasp_clearance": -0.001},
+    {"name": "Bad Name"},
+    {"colour": "red"},
+]
+
+
+@pytest.mark.parametrize("change", GRIPPER_CASES)
+def test_the_gripper_schema_accepts_what_the_library_accepts(change):
+    """The typed schema documents graspgen's own validation: it must not accept or refuse differently."""
+    from pydantic import ValidationError
+
+    from graspgen.errors import InvalidGripperError
+    from graspgen.examples import EXAMPLE_GRIPPER
+    from graspgen.gripper import GripperSpec
+    from services.api.contract_schemas import GripperSpec as GripperSpecDoc
+
+    spec = {**EXAMPLE_GRIPPER, **change}
+    try:
+        GripperSpec.from_dict(spec)
+        library = True
+    except InvalidGripperError:
+        library = False
+    try:
+        GripperSpecDoc.model_validate(spec, strict=True)
+        documented = True
+    except ValidationError:
+        documented = False
+    assert documented == library, spec
+
+
+PARAM_CASES = [
+    {},
+    {"points": 99},
+    {"points": 100},
+    {"points": 1_000_001},
+    {"rolls": 64},
+    {"rolls": 65},
+    {"k1": 0},
+    {"k2": 1000},
+    {"seed": -1},
+    {"safety_factor": 0.5},
+    {"friction": 0.0},
+    {"friction": 10.0},
+    {"inside": True},
+    {"collision": "paper"},
+    {"collision": "exact"},
+    {"colour": "red"},
+]
+
+
+@pytest.mark.parametrize("params", PARAM_CASES)
+def test_the_params_schema_accepts_what_the_library_accepts(params):
+    from pydantic import ValidationError
+
+    from graspgen.errors import InvalidParameterError
+    from graspgen.params import Params
+    from services.api.contract_schemas import JobParams
+
+    try:
+        Params.from_dict(params)
+        library = True
+    except (InvalidParameterError, TypeError):
+        library = False
+    try:
+        JobParams.model_validate(params, strict=True)
+        documented = True
+    except ValidationError:
+        documented = False
+    assert documented == library, params

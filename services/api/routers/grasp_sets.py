@@ -22,6 +22,7 @@ _EXPORT_RESPONSE: dict[int | str, dict[str, Any]] = {
         "description": "The grasp_set/1 export (CONTRACT.md), byte for byte as the core wrote it",
         "content": {
             "application/json": {
+                "schema": {"$ref": "#/components/schemas/GraspSetExport"},
                 "example": {
                     "format": "graspgen.grasp_set/1",
                     "units": "m",
@@ -30,7 +31,7 @@ _EXPORT_RESPONSE: dict[int | str, dict[str, Any]] = {
                     "params": {"points": 10000, "k1": 16, "k2": 4, "seed": 0, "...": "..."},
                     "stats": {"points": 10000, "candidates": 812, "...": "..."},
                     "grasps": [{"pose": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], "width": 0.031}],
-                }
+                },
             }
         },
         "headers": {"ETag": {"description": "strong: the sha256 of the body", "schema": {"type": "string"}}},

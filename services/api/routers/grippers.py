@@ -3,6 +3,7 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Path, Query, Response
+from pydantic import WithJsonSchema
 
 from ..crud import grippers as crud
 from ..deps import ReadDep, ReadSessionDep, SessionDep, SettingsDep, WriteDep
@@ -30,7 +31,12 @@ def create_gripper(
     response: Response,
     principal: WriteDep,
     session: SessionDep,
-    spec: Annotated[dict[str, Any], Body(examples=[GRIPPER_SPEC_EXAMPLE])],
+    spec: Annotated[
+        dict[str, Any],
+        Body(examples=[GRIPPER_SPEC_EXAMPLE]),
+        # documented as the typed spec; graspgen's GripperSpec.from_dict validates it (one source of messages)
+        WithJsonSchema({"allOf": [{"$ref": "#/components/schemas/GripperSpec"}]}),
+    ],
 ) -> dict:
     out, created = crud.create_gripper(session, spec)
     response.status_code = 201 if created else 200

@@ -1,0 +1,295 @@
+"""Typed OpenAPI documents of the contract's payloads: the gripper spec, job params, the grasp_set/1 export and the
+pick query (CONTRACT.md; docs/API.md explains frames and units).
+
+GripperSpec, JobParams and GraspSetExport *document*: the routes still hand the raw JSON to graspgen
+(GripperSpec.from_dict, Params.from_dict), which stays the single source of validation and of its messages; the
+schemas state the same rules. The export models allow extra fields, so fields the library adds pass through.
+PickRequest validates shapes and types; the numbers (pose orthonormality, non-zero vectors, ranges) are checked by
+graspgen.pick.PickQuery with the same rules as the Python API.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from graspgen.examples import EXAMPLE_GRIPPER
+from graspgen.gripper import SLUG_PATTERN
+from graspgen.pick import DEFAULT_LIMIT, DEFAULT_PREGRASP_DISTANCE, MAX_LIMIT, MAX_PLANES
+
+__all__ = [
+    "GripperSpec",
+    "JobParams",
+    "GraspSetExport",
+    "ExportGrasp",
+    "PickRequest",
+    "PickResponse",
+    "PickedGrasp",
+    "DOCUMENT_MODELS",
+]
+
+SLUG = SLUG_PATTERN.pattern
+ID_MAX = 2**31 - 1
+
+Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+Row4 = Annotated[list[float], Field(min_length=4, max_length=4)]
+Matrix4 = Annotated[
+    list[Row4],
+    Field(
+        min_length=4,
+        max_length=4,
+        description="4x4 homogeneous pose, row-major, metres; rotation orthonormal with det +1, last row 0 0 0 1",
+        examples=[[[1, 0, 0, 0.4], [0, 1, 0, 0], [0, 0, 1, 0.02], [0, 0, 0, 1]]],
+    ),
+]
+_IDENTITY = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+
+
+# -- gripper spec -----------------------------------------------------------------------------------------------------
+class GripperSpec(BaseModel):
+    """A parallel-jaw gripper (CONTRACT.md gripper spec). All lengths in metres, in the grasp frame: X closing axis,
+    Y pad width, Z approach (the palm lies at -Z). Unknown fields are refused."""
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [dict(EXAMPLE_GRIPPER)]})
+    name: str = Field(pattern=SLUG, description="slug", examples=["pgn-80"])
+    stroke: float = Field(gt=0, le=2, description="maximum opening between the finger pads, m")
+    min_width: float | None = Field(0.0, ge=0, description="smallest width the gripper can hold, m (< stroke)")
+    finger_width: float = Field(gt=0, le=2, description="pad extent along Y, m")
+    finger_depth: float = Field(gt=0, le=2, description="pad extent along Z, m; the contact sits at its centre")
+    finger_thickness: float = Field(gt=0, le=2, description="finger extent along X, m")
+    palm_depth: float | None = Field(0.0, ge=0, le=2, description="box behind the fingers along -Z, m; 0 = no palm")
+    palm_width: float | None = Field(None, gt=0, le=2, description="palm extent along Y, m; default finger_width")
+    friction: float = Field(gt=0, description="Coulomb coefficient pad/part (a job's `friction` overrides it)")
+    pregrasp_clearance: float = Field(
+        ge=0, description="extra opening before closing, m: open width = min(width + this, stroke)"
+    )
+    grip_force: float | None = Field(
+        None, gt=0, description="force each finger presses with, N (criterion (e) `hold` needs it)"
+    )
+
+
+# -- job params -------------------------------------------------------------------------------------------------------
+class JobParams(BaseModel):
+    """Parameters of a job (CONTRACT.md CLI and HTTP API); every field is optional. graspgen's Params and the job
+    service check them; unknown names are refused. A `cluster` job takes only k1, k2, seed and the quality fields."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {"points": 10000, "safety_factor": 1.5, "rolls": 16, "k1": 16, "k2": 4, "seed": 0},
+                {"points": 10000, "density": 7850, "hold": "any", "accel": 9.81, "select": "best-near-medoid"},
+            ]
+        },
+    )
+    points: int | None = Field(None, ge=100, le=1_000_000, description="surface samples")
+    friction: float | None = Field(None, gt=0, le=10, description="Coulomb coefficient; default the gripper's")
+    safety_factor: float | None = Field(None, ge=1, le=100, description="friction cone half-angle divisor")
+    rolls: int | None = Field(None, ge=1, le=64, description="roll angles 2 pi k / rolls tested per pair")
+    k1: int | None = Field(None, ge=1, le=10_000, description="translation clusters")
+    k2: int | None = Field(None, ge=1, le=1_000, description="direction clusters per translation cluster")
+    inside: bool | None = Field(None, description="also grasp from inside (bores), fingers opening outwards")
+    collision: Literal["swept", "paper"] | None = Field(None, description="collision model of criterion (d)")
+    seed: int | None = Field(None, ge=0, le=2**32 - 1)
+    mass_kg: float | None = Field(None, gt=0, description="part mass, kg (criterion (e)); default the object's")
+    density: float | None = Field(None, ge=1, le=100_000, description="part density, kg/m^3 (mass = density x volume)")
+    accel: float | None = Field(None, ge=0, description="acceleration the hold must resist besides gravity, m/s^2")
+    hold: Literal["any", "off"] | None = Field(None, description="criterion (e): `off` switches it off")
+    position_tolerance: float | None = Field(
+        None, ge=0, description="m: criterion (c) must hold for every normal within this distance of a contact"
+    )
+    select: Literal["medoid", "best-near-medoid"] | None = Field(None, description="docs/QUALITY.md")
+    validate_: bool | None = Field(
+        None, alias="validate", description="simulate every exported grasp in MuJoCo and repair failures"
+    )
+
+
+# -- the grasp_set/1 export -------------------------------------------------------------------------------------------
+class ExportObject(BaseModel):
+    model_config = ConfigDict(extra="allow")
+    name: str
+    version: int
+    sha256: str | None = Field(None, description="sha256 of the uploaded file")
+    source_units: str | None = Field(None, description="the unit the file was given in; the export is in metres")
+
+
+class ExportStats(BaseModel):
+    model_config = ConfigDict(extra="allow")
+    points: int | None = None
+    pairs_total: int | None = None
+    rejected: dict[str, int] | None = Field(None, description="candidates each criterion removed")
+    candidates: int | None = Field(None, description="pairs that passed every criterion: the NPZ's rows")
+    timings_s: dict[str, float] | None = Field(None, description="wall-clock seconds per stage (not reproducible)")
+    warnings: list[str] | None = None
+
+
+class ExportGrasp(BaseModel):
+    """One exported grasp (a cluster representative), object frame, metres."""
+
+    model_config = ConfigDict(extra="allow")
+    pose: Matrix4 = Field(description="T_object_grasp at the roll `roll_deg`, row-major")
+    width: float = Field(description="contact distance, m")
+    contacts: list[Vec3] = Field(description="the two contacts (object frame, m); +X points from 0 to 1")
+    normals: list[Vec3] = Field(description="outward unit surface normals at the contacts")
+    friction_margin_deg: float = Field(description="cone half-angle / safety factor minus the worse contact angle")
+    free_rolls_deg: list[float] = Field(description="every collision-free roll about +X, degrees")
+    cluster: list[int] = Field(description="[translation cluster, direction cluster]")
+    cluster_size: int = Field(description="candidates this grasp represents")
+    roll_deg: float | None = Field(None, description="the roll the pose uses")
+    mode: Literal["outside", "inside"] | None = None
+    candidate: int | None = Field(None, description="row in the candidate NPZ")
+    medoid: int | None = Field(None, description="the cluster's medoid this grasp stands in for (best-near-medoid)")
+    quality: dict[str, float] | None = Field(None, description="score and terms (docs/QUALITY.md)")
+    sim: dict[str, Any] | None = Field(None, description="MuJoCo validation of this grasp")
+    hold_margin: float | None = Field(None, description="criterion (e): load resisted / load required (>= 1)")
+
+
+class GraspSetExport(BaseModel):
+    """`graspgen.grasp_set/1` (CONTRACT.md): one run's representatives, object frame, metres."""
+
+    model_config = ConfigDict(extra="allow")
+    format: Literal["graspgen.grasp_set/1"]
+    units: Literal["m"]
+    object: ExportObject
+    gripper: dict[str, Any] = Field(description="the gripper spec (GripperSpec) the set was computed for")
+    params: dict[str, Any] = Field(description="the run's parameters (JobParams), friction resolved")
+    stats: ExportStats
+    grasps: list[ExportGrasp] = Field(description="representatives, best first within each translation cluster")
+
+
+# -- the pick query ---------------------------------------------------------------------------------------------------
+class Approach(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    direction: Vec3 = Field(description="world frame; any non-zero length", examples=[[0, 0, -1]])
+    max_angle_deg: float = Field(ge=0, le=180, description="the grasp's +Z must lie within this angle of direction")
+
+
+class Plane(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    point: Vec3 = Field(description="a point on the plane, world frame, m")
+    normal: Vec3 = Field(description="points to the free side (any non-zero length)")
+
+
+class PickRequest(BaseModel):
+    """Give `grasp_set`, or `object` and `gripper` (the catalogue's current set of the pair)."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {
+                    "object": "ring-screw",
+                    "gripper": "pgn-80",
+                    "T_world_object": [[1, 0, 0, 0.4], [0, 1, 0, 0], [0, 0, 1, 0.02], [0, 0, 0, 1]],
+                    "approach": {"direction": [0, 0, -1], "max_angle_deg": 30},
+                    "planes": [{"point": [0, 0, 0], "normal": [0, 0, 1]}],
+                    "pregrasp_distance": 0.05,
+                    "T_tcp_flange": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, -0.1], [0, 0, 0, 1]],
+                    "limit": 10,
+                },
+                {"grasp_set": 12, "T_world_object": _IDENTITY, "limit": 1},
+            ]
+        },
+    )
+    object: str | None = Field(None, pattern=SLUG, description="object name (with gripper)")
+    gripper: str | None = Field(None, pattern=SLUG, description="gripper name (with object)")
+    grasp_set: int | None = Field(None, ge=1, le=ID_MAX, description="a grasp set id instead of object and gripper")
+    T_world_object: Matrix4 = Field(description="where the part lies: the object's model frame in the world")
+    approach: Approach | None = Field(None, description="cone of allowed approach directions; omitted: any")
+    planes: list[Plane] = Field(
+        default_factory=list,
+        max_length=MAX_PLANES,
+        description="half-spaces (bin floor, walls): the fingers and palm at the grasp and the open fingers and palm "
+        "at the pre-grasp must lie on each plane's normal side",
+    )
+    pregrasp_distance: float = Field(
+        DEFAULT_PREGRASP_DISTANCE, ge=0, le=2, description="m: the pre-grasp is the grasp retreated along its -Z"
+    )
+    T_tcp_flange: Matrix4 | None = Field(None, description="the flange pose relative to the TCP (grasp frame)")
+    limit: int = Field(DEFAULT_LIMIT, ge=1, le=MAX_LIMIT, description="grasps returned at most")
+
+    @model_validator(mode="after")
+    def _one_source(self) -> PickRequest:
+        if self.grasp_set is None and not (self.object and self.gripper):
+            raise ValueError("give either grasp_set, or object and gripper")
+        if self.grasp_set is not None and (self.object or self.gripper):
+            raise ValueError("give either grasp_set, or object and gripper, not both")
+        return self
+
+
+class PickedGrasp(BaseModel):
+    """One feasible (candidate, roll), world frame, metres."""
+
+    model_config = ConfigDict(extra="allow")
+    T_world_grasp: Matrix4 = Field(description="T_world_object @ T_object_grasp(candidate, roll)")
+    position: Vec3 = Field(description="the grasp origin (contact midpoint) in the world, m")
+    quaternion_xyzw: list[float] = Field(min_length=4, max_length=4, description="rotation of T_world_grasp, w >= 0")
+    T_world_pregrasp: Matrix4 = Field(description="the grasp retreated pregrasp_distance along its -Z")
+    T_world_flange: Matrix4 | None = Field(None, description="T_world_grasp @ T_tcp_flange (when given)")
+    T_world_preflange: Matrix4 | None = Field(None, description="T_world_pregrasp @ T_tcp_flange (when given)")
+    width: float = Field(description="contact distance, m")
+    open_width: float = Field(description="opening at the pre-grasp: min(width + pregrasp_clearance, stroke), m")
+    roll_deg: float = Field(description="roll about the closing axis +X (CONTRACT.md roll convention)")
+    roll_index: int = Field(description="index into the NPZ's roll_angles_rad")
+    approach_angle_deg: float = Field(description="angle between the grasp's +Z and approach.direction")
+    candidate: int = Field(description="row in the candidate NPZ")
+    cluster: list[int] = Field(description="[translation cluster, direction cluster]")
+    medoid: bool = Field(description="the candidate is one of the exported representatives")
+    score: float = Field(description="the ranking score (see the response's `score`), higher is better")
+    friction_margin_deg: float
+    hold_margin: float | None = Field(None, description="criterion (e) margin, when the set has one")
+
+
+class PickRemoved(BaseModel):
+    approach: int = Field(description="(candidate, roll) pairs outside the approach cone")
+    planes: int = Field(description="pairs inside the cone that some plane blocks")
+    per_plane: list[int] = Field(description="pairs inside the cone each plane blocks (they overlap)")
+    candidates: int | None = Field(None, description="(reason only) pairs considered")
+
+
+class PickResponse(BaseModel):
+    model_config = ConfigDict(
+        json_schema_extra={
+            "example": {
+                "grasp_set": 12,
+                "version": 3,
+                "considered": 300000,
+                "feasible": 41234,
+                "score": "quality",
+                "removed": {"approach": 251000, "planes": 7766, "per_plane": [7766]},
+                "grasps": [
+                    {
+                        "T_world_grasp": [[0, 1, 0, 0.41], [1, 0, 0, 0.0], [0, 0, -1, 0.03], [0, 0, 0, 1]],
+                        "position": [0.41, 0.0, 0.03],
+                        "quaternion_xyzw": [0.7071068, 0.7071068, 0.0, 0.0],
+                        "T_world_pregrasp": [[0, 1, 0, 0.41], [1, 0, 0, 0.0], [0, 0, -1, 0.08], [0, 0, 0, 1]],
+                        "width": 0.024,
+                        "open_width": 0.044,
+                        "roll_deg": 180.0,
+                        "roll_index": 8,
+                        "approach_angle_deg": 0.0,
+                        "candidate": 10234,
+                        "cluster": [4, 1],
+                        "medoid": False,
+                        "score": 0.91,
+                        "friction_margin_deg": 12.5,
+                    }
+                ],
+            }
+        }
+    )
+    grasp_set: int
+    version: int = Field(description="the set's version within its object and gripper pair")
+    considered: int = Field(description="(candidate, free roll) pairs of the set")
+    feasible: int = Field(description="pairs that pass the cone and every plane")
+    score: Literal["quality", "friction_margin_deg"] = Field(
+        description="what `score` is: the quality score when the set has quality terms, else the friction margin"
+    )
+    removed: PickRemoved
+    grasps: list[PickedGrasp] = Field(description="up to `limit`, best first (score, then smaller approach angle)")
+    reason: PickRemoved | None = Field(None, description="when `grasps` is empty: what each filter removed")
+
+
+#: schemas added to the OpenAPI components by name (routes that take or give raw JSON refer to them)
+DOCUMENT_MODELS: tuple[type[BaseModel], ...] = (GripperSpec, JobParams, GraspSetExport)
