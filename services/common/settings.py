@@ -47,6 +47,13 @@ class Settings(BaseSettings):
     max_upload_bytes: int = Field(default=50 * 1024 * 1024, ge=1024)
     max_json_bytes: int = Field(default=2 * 1024 * 1024, ge=1024)
     max_bulk_items: int = Field(default=1000, ge=1, le=100_000)
+    #: largest decoded arrays one uploaded part may declare (graspgen.limits): checked from headers and counts
+    #: before anything is inflated, so a compressed NPZ/GLB/PLY cannot inflate past it
+    max_decoded_bytes: int = Field(default=256 * 1024 * 1024, ge=1024)
+    #: memory one job may take at its peak (graspgen.memory's estimate, interpreter included); a generate job whose
+    #: estimate exceeds it is refused at submission (422 naming the largest point count that fits) and by the
+    #: worker before it runs. Unset: 75 % of this machine's memory divided by worker_concurrency, at most 8 GiB
+    worker_memory_bytes: int | None = Field(default=None, ge=64 * 1024 * 1024)
     page_size_default: int = Field(default=50, ge=1, le=1000)
     page_size_max: int = Field(default=500, ge=1, le=10_000)
     #: grasp-set exports kept in the API's memory (they are immutable, so the cache is never invalidated)
@@ -147,6 +154,16 @@ class Settings(BaseSettings):
         if self.database_url is not None:
             return self.database_url.get_secret_value()
         return f"sqlite:///{(self.storage_dir / 'graspgen.sqlite3').resolve()}"
+
+    @property
+    def job_memory_budget(self) -> int:
+        """Bytes one job may take at its peak (worker_memory_bytes, or derived from this machine's memory)."""
+        if self.worker_memory_bytes is not None:
+            return self.worker_memory_bytes
+        import os
+
+        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+        return min(8 * 1024**3, int(0.75 * total) // self.worker_concurrency)
 
     @property
     def tokens_path(self) -> Path:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import math
 import re
 import tempfile
 from pathlib import Path
@@ -65,6 +66,7 @@ def version_out(obj_name: str, v: ObjectVersion) -> dict[str, Any]:
         "extents": v.extents,
         "watertight": v.watertight,
         "warnings": v.warnings,
+        "mass_kg": v.mass_kg,
         "created_at": v.created_at,
         "links": {"self": base, "file": base + "/file", "object": f"/v1/objects/{obj_name}"},
     }
@@ -88,11 +90,14 @@ def upload_object(
     fmt: str | None,
     filename: str | None,
     stream: BinaryIO,
+    mass_kg: float | None = None,
 ) -> tuple[dict[str, Any], bool]:
-    """Store an uploaded part; returns (version view, created). The same bytes and units return the existing one."""
+    """Store an uploaded part; returns (version view, created). The same bytes and units return the existing one
+    (a different `mass_kg` for them is a 409: a version never changes; a job can give its own mass_kg)."""
     from graspgen.parts import load_part
 
     check_slug(name, "object")
+    mass_kg = check_mass(mass_kg)
     to_metres_scale(units)  # raises InvalidUnitsError -> 422
     units = units.strip().lower()
     fmt = _format(fmt, filename)
@@ -117,10 +122,12 @@ def upload_object(
         existing = _find(session, name, digest, units)
         session.rollback()  # hold no transaction (a SQLite write lock) while the mesh is checked
         if existing is not None:
-            return version_out(name, existing), False
+            return _same(name, existing, mass_kg), False
         # bytes, not the path: the loader names its input in messages, and the client must not see the server's
         # temp path (load_part reads the whole file either way)
-        part = load_part(path.read_bytes(), units=units, name=name, file_type=fmt)  # InvalidMeshError -> 422
+        part = load_part(  # InvalidMeshError -> 422 (also for files declaring more than max_decoded_bytes)
+            path.read_bytes(), units=units, name=name, file_type=fmt, max_decoded_bytes=settings.max_decoded_bytes
+        )
         blob = storage.put_file(path)
     for _ in range(3):
         try:
@@ -145,6 +152,7 @@ def upload_object(
                 watertight=bool(part.watertight),
                 warnings=[str(w) for w in (part.warnings or [])],
                 file_key=blob.key,
+                mass_kg=mass_kg,
             )
             obj.updated_at = utcnow()
             session.add(v)
@@ -158,8 +166,41 @@ def upload_object(
             session.rollback()
             existing = _find(session, name, digest, units)
             if existing is not None:
-                return version_out(name, existing), False
+                return _same(name, existing, mass_kg), False
     raise ApiError(409, "conflict", "concurrent uploads under this name; retry")
+
+
+#: the largest part mass accepted, kg (graspgen.Params takes the same range for a job's mass_kg)
+MASS_MAX_KG = 100_000.0
+
+
+def check_mass(mass_kg: float | None) -> float | None:
+    """A positive finite mass in kg, or None; anything else is a 422 problem."""
+    if mass_kg is None:
+        return None
+    if not math.isfinite(mass_kg) or not 0.0 < mass_kg <= MASS_MAX_KG:
+        raise ApiError(
+            422,
+            "invalid-parameter",
+            f"mass_kg must be a finite number of kilograms > 0 and <= {MASS_MAX_KG:g}, got {mass_kg!r}",
+            field="mass_kg",
+        )
+    return float(mass_kg)
+
+
+def _same(name: str, existing: ObjectVersion, mass_kg: float | None) -> dict[str, Any]:
+    """The existing version for an identical upload, unless the upload gives it another mass."""
+    if mass_kg is not None and existing.mass_kg != mass_kg:
+        have = "no mass" if existing.mass_kg is None else f"mass_kg {existing.mass_kg:g}"
+        raise ApiError(
+            409,
+            "mass-conflict",
+            f"version {existing.version} of {name!r} has these bytes with {have}; a version never changes (give "
+            "mass_kg in the job's params instead)",
+            field="mass_kg",
+            version=existing.version,
+        )
+    return version_out(name, existing)
 
 
 def _object(session: Session, name: str) -> ObjectModel:

@@ -105,22 +105,28 @@ def npy_header(shape: tuple[int, ...], dtype: str = "<f8") -> bytes:
 def _zip_one(name: str, payload_deflated: bytes, size: int, crc: int) -> bytes:
     """A zip archive of one deflated member, written by hand so that its declared size can be anything."""
     fname = name.encode()
-    local = struct.pack("<IHHHHHIIIHH", 0x04034B50, 20, 0, 8, 0, 0, crc, len(payload_deflated), size, len(fname), 0)
+    csize = len(payload_deflated)
+    extra, ver = b"", 20
+    if size >= 0xFFFFFFFF:  # zip64: the sizes move to an extra field
+        extra, ver, size32, csize32 = struct.pack("<HHQQ", 1, 16, size, csize), 45, 0xFFFFFFFF, 0xFFFFFFFF
+    else:
+        size32, csize32 = size, csize
+    local = struct.pack("<IHHHHHIIIHH", 0x04034B50, ver, 0, 8, 0, 0, crc, csize32, size32, len(fname), len(extra))
     central = struct.pack(
-        "<IHHHHHHIIIHHHHHII", 0x02014B50, 20, 20, 0, 8, 0, 0, crc, len(payload_deflated), size, len(fname), 0, 0, 0, 0,
-        0, 0,
+        "<IHHHHHHIIIHHHHHII", 0x02014B50, ver, ver, 0, 8, 0, 0, crc, csize32, size32, len(fname), len(extra), 0, 0,
+        0, 0, 0,
     )  # fmt: skip
-    cd = central + fname
-    offset = len(local) + len(fname) + len(payload_deflated)
+    cd = central + fname + extra
+    offset = len(local) + len(fname) + len(extra) + csize
     end = struct.pack("<IHHHHIIH", 0x06054B50, 0, 0, 1, 1, len(cd), offset, 0)
-    return local + fname + payload_deflated + cd + end
+    return local + fname + extra + payload_deflated + cd + end
 
 
-def npz_zero_bomb(inflated: int) -> bytes:
+def npz_zero_bomb(inflated: int, *, crc: bool = True) -> bytes:
     """An NPZ whose `points` member (float64 zeros, (inflated // 24, 3)) deflates about 1000:1: 1 GiB in ~1 MB.
 
     The zeros are one deflate block of 1 MiB repeated (a full flush makes each copy independent), so building a
-    1 GiB bomb takes a second, not a minute; the CRC is the true one.
+    1 GiB bomb takes a second, not a minute; the CRC is the true one (`crc=False`: 0, for bombs of tens of GiB).
     """
     import zlib
 
@@ -132,12 +138,12 @@ def npz_zero_bomb(inflated: int) -> bytes:
     n_bytes = rows * 24
     whole, rest = divmod(n_bytes, 1 << 20)
     tail = comp.compress(bytes(rest)) + comp.flush(zlib.Z_FINISH)
-    crc = zlib.crc32(header)
+    check = zlib.crc32(header)
     zero = bytes(1 << 20)
-    for _ in range(whole):
-        crc = zlib.crc32(zero, crc)
-    crc = zlib.crc32(bytes(rest), crc)
-    return _zip_one("points.npy", head + mib * whole + tail, len(header) + n_bytes, crc)
+    for _ in range(whole if crc else 0):
+        check = zlib.crc32(zero, check)
+    check = zlib.crc32(bytes(rest), check) if crc else 0
+    return _zip_one("points.npy", head + mib * whole + tail, len(header) + n_bytes, check)
 
 
 def npz_forged_shape(rows: int) -> bytes:
