@@ -8,29 +8,38 @@ rotational fictitious forces); together with gravity the part feels `m (g - a(t)
 one static MuJoCo model per part and gripper, with exact contact kinematics, and lets every grasp run on its own
 `MjData` in a thread of its own (mj_step releases the GIL).
 
-Gravity acts along the grasp frame's +Z: the gripper came down along +Z onto the part and lifts it along -Z, the
-usual top-down pick. Each grasp goes through
+At the pick gravity acts along the grasp frame's +Z: the gripper came down along +Z onto the part and lifts it
+along -Z, the usual top-down pick. Each grasp goes through
 
 1. approach: the open gripper (pre-grasp width) comes in along +Z from clear of the part; any penetration deeper
    than `approach_tolerance` on the way or at the pose -> `collision`;
-2. close: both fingers pushed with `grip_force` (coupled like a real parallel gripper); either finger without a
+2. close: both fingers pushed with the grip force (coupled like a real parallel gripper); either finger without a
    contact afterwards -> `no_contact`;
 3. lift: the load ramps up to gravity plus the lift acceleration, then holds;
-4. shake: one sine period of acceleration along each of `shake_directions`;
+4. turn (only under a `Perturbation` with another gravity direction): the robot turns the part, so the load m g
+   swings from +Z to that direction of the grasp frame over `turn_time` (slowly: the rotational fictitious forces,
+   well under 1 m/s^2 at a few cm from the wrist, are left out), then rests there;
+5. shake: one sine period of acceleration along each of the shake directions;
 
 losing either finger's contact (or the part moving more than `drop_distance`) -> `dropped`; the contact midpoint
 moving more than `slip_limit` or the part turning more than `rotation_limit_deg` relative to the fingers ->
 `slipped`; otherwise a success. Every constant is a field of `SimConstants`.
 
 Collision geometry of the part: a convex decomposition (CoACD), or the part itself when it is convex; if the
-decomposition is unavailable or fails, the convex hull, and `SimPart.note` says so. Mass and inertia come from the
-mesh volume (trimesh's mass properties) and a density.
+decomposition is unavailable or fails, the convex hull, and `SimPart.note` says so. The centre of mass and the shape
+of the inertia come from the mesh volume (trimesh's mass properties), scaled to the part's real mass (`mass_kg`) or to
+a density; the grip force is the gripper's (`GripperSpec.grip_force`) or given. Neither has a default: a validation
+with a guessed mass or force tells nothing about the real pick.
+
+A `Perturbation` (mass scale, friction, gravity direction after the pick, shake amplitude and directions) changes one
+simulation; `perturbation_set(seed)` is the standard set the quality benchmark checks every exported grasp against.
 """
 
 from __future__ import annotations
 
 import math
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from typing import Any
@@ -46,15 +55,20 @@ __all__ = [
     "SIM",
     "DEFAULT_DENSITY",
     "REASONS",
+    "Perturbation",
+    "NOMINAL",
+    "perturbation_set",
     "SimPart",
     "SimResult",
     "prepare_part",
     "simulate_grasp",
     "simulate_grasps",
+    "simulate_perturbed",
     "summarise",
 ]
 
-#: kg/m^3; steel, the common case for machined parts and the heavier (stricter) one
+#: kg/m^3; steel. Not a default of this module (prepare_part needs the real mass or a density): the pipeline's
+#: fallback while it still passes a density
 DEFAULT_DENSITY = 7850.0
 
 #: failure reasons, in the order the stages can produce them
@@ -67,13 +81,11 @@ class SimConstants:
 
     #: integration step; 1 ms keeps the stiff pad contacts of gram-scale parts stable
     timestep: float = 1.0e-3
-    #: force of each finger on the part while closed (N); a small servo-electric gripper's lower setting
-    grip_force: float = 20.0
     #: mass of each finger (kg)
     finger_mass: float = 0.05
     #: viscous damping of the finger joints (N s/m): closing speed grip_force / finger_damping = 0.2 m/s
     finger_damping: float = 100.0
-    #: standard gravity (m/s^2), along the grasp frame's +Z
+    #: standard gravity (m/s^2), along the grasp frame's +Z at the pick
     gravity: float = 9.81
     #: time to close the fingers and let the part settle (s)
     close_time: float = 0.25
@@ -82,6 +94,9 @@ class SimConstants:
     lift_time: float = 0.2
     #: time holding the part at rest after the lift (s)
     hold_time: float = 0.2
+    #: time the robot takes to turn the part when a perturbation moves gravity away from +Z (s, for 90 degrees;
+    #: a half turn takes twice as long), followed by another hold_time at rest
+    turn_time: float = 0.3
     #: shaking: peak acceleration (m/s^2) and frequency (Hz) of one sine period per direction
     shake_acceleration: float = 5.0
     shake_frequency: float = 4.0
@@ -130,6 +145,95 @@ class SimConstants:
 
 SIM = SimConstants()
 
+_AXES = {"+X": (1.0, 0.0, 0.0), "-X": (-1.0, 0.0, 0.0), "+Y": (0.0, 1.0, 0.0), "-Y": (0.0, -1.0, 0.0)}
+_AXES.update({"+Z": (0.0, 0.0, 1.0), "-Z": (0.0, 0.0, -1.0)})
+
+
+@dataclass(frozen=True)
+class Perturbation:
+    """One variation of the simulation, to check that a grasp does not hold only at one setting.
+
+    `mass_scale` multiplies the part's mass and inertia; `friction` replaces the pad/part coefficient (None: the
+    part's); `gravity` is the direction of the load m g in the grasp frame after the pick (unit 3-vector: +Z is the
+    top-down pick itself, -Z the part resting on the palm after a half turn, +-X along the closing axis (one finger
+    carries the part), +-Y across it); `shake_acceleration` (m/s^2) and `shake_directions` (grasp frame) replace
+    SimConstants' shaking when given."""
+
+    name: str = "nominal"
+    mass_scale: float = 1.0
+    friction: float | None = None
+    gravity: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    shake_acceleration: float | None = None
+    shake_directions: tuple[tuple[float, float, float], ...] | None = None
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.mass_scale) and self.mass_scale > 0):
+            raise InvalidParameterError(f"mass_scale must be positive, got {self.mass_scale!r}", field="mass_scale")
+        if self.friction is not None and not (math.isfinite(self.friction) and self.friction > 0):
+            raise InvalidParameterError(f"friction must be positive, got {self.friction!r}", field="friction")
+        g = np.asarray(self.gravity, dtype=np.float64).reshape(-1)
+        if g.shape != (3,) or not np.all(np.isfinite(g)) or np.linalg.norm(g) < 1e-9:
+            raise InvalidParameterError(f"gravity must be a non-zero 3-vector, got {self.gravity!r}", field="gravity")
+        object.__setattr__(self, "gravity", tuple(float(v) for v in g / np.linalg.norm(g)))
+        if self.shake_acceleration is not None and not (
+            math.isfinite(self.shake_acceleration) and self.shake_acceleration >= 0
+        ):
+            raise InvalidParameterError("shake_acceleration must be >= 0", field="shake_acceleration")
+        if self.shake_directions is not None:
+            dirs = []
+            for v in self.shake_directions:
+                u = np.asarray(v, dtype=np.float64).reshape(-1)
+                if u.shape != (3,) or not np.all(np.isfinite(u)) or np.linalg.norm(u) < 1e-9:
+                    raise InvalidParameterError(f"bad shake direction {v!r}", field="shake_directions")
+                dirs.append(tuple(float(x) for x in u / np.linalg.norm(u)))
+            object.__setattr__(self, "shake_directions", tuple(dirs))
+
+
+NOMINAL = Perturbation()
+
+
+def perturbation_set(seed: int = 0) -> tuple[Perturbation, ...]:
+    """The standard perturbations (11), each changing the nominal simulation in one way, plus one seeded mixture:
+
+    - mass x0.5 and x1.5 (mass and inertia), friction 0.4 and 0.6 (absolute), all with the top-down pick;
+    - gravity turned to -Z, +X, -X, +Y, -Y of the grasp frame after the pick (+Z, the pick itself, is in every
+      member: each one starts with the nominal lift);
+    - a lateral shake: 1 g (9.81 m/s^2) along two perpendicular directions across gravity (seeded angle);
+    - a mixture: seeded mass scale in [0.5, 1.5], friction in [0.4, 0.6], one of the six gravity directions and a
+      lateral shake of 1 g.
+    """
+    rng = np.random.default_rng([int(seed), 1414])
+    members = [
+        Perturbation("mass x0.5", mass_scale=0.5),
+        Perturbation("mass x1.5", mass_scale=1.5),
+        Perturbation("friction 0.4", friction=0.4),
+        Perturbation("friction 0.6", friction=0.6),
+    ]
+    members += [Perturbation(f"gravity {k}", gravity=_AXES[k]) for k in ("-Z", "+X", "-X", "+Y", "-Y")]
+    a = float(rng.uniform(0.0, math.pi))
+    lateral = ((math.cos(a), math.sin(a), 0.0), (-math.sin(a), math.cos(a), 0.0))
+    members.append(Perturbation("lateral shake 1 g", shake_acceleration=9.81, shake_directions=lateral))
+    g_key = str(rng.choice(list(_AXES)))
+    g = np.asarray(_AXES[g_key])
+    helper = np.array([1.0, 0.0, 0.0]) if abs(g[0]) < 0.5 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(g, helper)
+    u /= np.linalg.norm(u)
+    v = np.cross(g, u)
+    b = float(rng.uniform(0.0, math.pi))
+    shake = (tuple(math.cos(b) * u + math.sin(b) * v), tuple(-math.sin(b) * u + math.cos(b) * v))
+    ms, mu = float(rng.uniform(0.5, 1.5)), float(rng.uniform(0.4, 0.6))
+    members.append(
+        Perturbation(
+            f"mixed (mass x{ms:.2f}, friction {mu:.2f}, gravity {g_key}, shake 1 g)",
+            mass_scale=ms,
+            friction=mu,
+            gravity=tuple(g),
+            shake_acceleration=9.81,
+            shake_directions=shake,
+        )
+    )
+    return tuple(members)
+
 
 @dataclass(frozen=True)
 class SimResult:
@@ -157,24 +261,54 @@ class SimPart:
     model: Any  # mujoco.MjModel
     spec: GripperSpec
     friction: float
-    mass: float
+    mass: float  # kg
     center_of_mass: np.ndarray  # (3,) object frame
     geometry: str  # "convex" | "coacd" | "convex-hull"
     pieces: int
     note: str | None
     vertices: np.ndarray  # (v, 3) the part's vertices, object frame (for the approach distance)
     constants: SimConstants = field(default_factory=SimConstants)
+    grip_force: float = 0.0  # N per finger
+    inertia: np.ndarray | None = None  # (3, 3) about the centre of mass, kg m^2
+    #: the convex pieces, kept to build the models of perturbations (another mass or friction)
+    hulls: list = field(default_factory=list, repr=False)
+    _variants: dict = field(default_factory=dict, repr=False, compare=False)
+    _lock: Any = field(default_factory=threading.Lock, repr=False, compare=False)
 
     def describe(self) -> dict[str, Any]:
         out = {
             "geometry": self.geometry,
             "pieces": self.pieces,
             "mass_kg": round(self.mass, 9),
-            "grip_force_n": self.constants.grip_force,
+            "grip_force_n": self.grip_force,
         }
         if self.note:
             out["note"] = self.note
         return out
+
+    def model_for(self, p: Perturbation) -> Any:
+        """The MjModel for perturbation `p`: the shared one unless it changes the mass or the friction (built once
+        per setting, then shared read-only like the nominal one)."""
+        mu = self.friction if p.friction is None else float(p.friction)
+        if p.mass_scale == 1.0 and mu == self.friction:
+            return self.model
+        key = (float(p.mass_scale), mu)
+        with self._lock:
+            if key not in self._variants:
+                import mujoco
+
+                xml = _xml(
+                    self.hulls,
+                    self.spec,
+                    mu,
+                    self.mass * p.mass_scale,
+                    self.center_of_mass,
+                    self.inertia * p.mass_scale,
+                    self.constants,
+                    self.grip_force,
+                )
+                self._variants[key] = mujoco.MjModel.from_xml_string(xml)
+            return self._variants[key]
 
 
 # --------------------------------------------------------------------------------------------------------------------
@@ -213,8 +347,11 @@ def _decompose(mesh: trimesh.Trimesh, c: SimConstants, seed: int) -> tuple[list[
     return pieces, "coacd", None
 
 
-def _mass_properties(mesh: trimesh.Trimesh, density: float) -> tuple[float, np.ndarray, np.ndarray, str | None]:
-    """Mass (kg), centre of mass (3,) and inertia about the centre of mass (3, 3) from the mesh volume."""
+def _mass_properties(
+    mesh: trimesh.Trimesh, density: float | None, mass_kg: float | None
+) -> tuple[float, np.ndarray, np.ndarray, str | None]:
+    """Mass (kg), centre of mass (3,) and inertia about the centre of mass (3, 3) from the mesh volume, at `density`
+    or scaled to `mass_kg` (uniform material)."""
     note = None
     body = mesh
     if not (mesh.is_watertight and mesh.volume > 0):
@@ -223,6 +360,8 @@ def _mass_properties(mesh: trimesh.Trimesh, density: float) -> tuple[float, np.n
     props = body.mass_properties
     volume = float(props["volume"])
     com = np.asarray(props["center_mass"], dtype=np.float64)
+    if mass_kg is not None:
+        density = mass_kg / volume
     inertia = np.asarray(props["inertia"], dtype=np.float64) * density  # trimesh's is for unit density
     return volume * density, com, inertia, note
 
@@ -231,7 +370,9 @@ def _fmt(values) -> str:
     return " ".join(f"{float(v):.9g}" for v in np.asarray(values).ravel())
 
 
-def _xml(pieces, spec: GripperSpec, friction: float, mass: float, com, inertia, c: SimConstants) -> str:
+def _xml(
+    pieces, spec: GripperSpec, friction: float, mass: float, com, inertia, c: SimConstants, grip_force: float
+) -> str:
     t, fw, fd = spec.finger_thickness, spec.finger_width, spec.finger_depth
     half_stroke = spec.stroke / 2
     torsion = friction * c.patch_radius
@@ -291,8 +432,8 @@ def _xml(pieces, spec: GripperSpec, friction: float, mass: float, com, inertia, 
     <joint joint1="close1" joint2="close0" polycoef="0 1 0 0 0"/>
   </equality>
   <actuator>
-    <motor name="grip0" joint="close0" ctrlrange="{-c.grip_force:.9g} {c.grip_force:.9g}"/>
-    <motor name="grip1" joint="close1" ctrlrange="{-c.grip_force:.9g} {c.grip_force:.9g}"/>
+    <motor name="grip0" joint="close0" ctrlrange="{-grip_force:.9g} {grip_force:.9g}"/>
+    <motor name="grip1" joint="close1" ctrlrange="{-grip_force:.9g} {grip_force:.9g}"/>
   </actuator>
 </mujoco>
 """
@@ -303,20 +444,46 @@ def prepare_part(
     spec: GripperSpec,
     *,
     friction: float | None = None,
-    density: float = DEFAULT_DENSITY,
+    mass_kg: float | None = None,
+    density: float | None = None,
+    grip_force: float | None = None,
     seed: int = 0,
     constants: SimConstants = SIM,
 ) -> SimPart:
-    """Build the MuJoCo model of `mesh` (metres, object frame) held by `spec`'s gripper; once per part."""
+    """Build the MuJoCo model of `mesh` (metres, object frame) held by `spec`'s gripper; once per part.
+
+    The part's mass is `mass_kg` (kg; inertia from the mesh's shape, uniform material) or its volume times `density`
+    (kg/m^3): exactly one is required. The grip force (N per finger) is `grip_force`, else the gripper's
+    `grip_force`; without either the validation is refused. InvalidParameterError on a missing or bad value."""
     import mujoco
 
-    if not (isinstance(density, (int, float)) and math.isfinite(density) and density > 0):
+    def positive(v) -> bool:
+        return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0
+
+    if mass_kg is None and density is None:
+        raise InvalidParameterError(
+            "physics validation needs the part's mass (mass_kg, kg) or its density (kg/m^3)", field="mass_kg"
+        )
+    if mass_kg is not None and density is not None:
+        raise InvalidParameterError("give the part's mass_kg or its density, not both", field="mass_kg")
+    if mass_kg is not None and not positive(mass_kg):
+        raise InvalidParameterError(f"mass_kg must be a positive number (kg), got {mass_kg!r}", field="mass_kg")
+    if density is not None and not positive(density):
         raise InvalidParameterError(f"density must be a positive number (kg/m^3), got {density!r}", field="density")
+    force = grip_force if grip_force is not None else spec.grip_force
+    if force is None:
+        raise InvalidParameterError(
+            "physics validation needs the gripper's grip force (grip_force, N per finger)", field="grip_force"
+        )
+    if not positive(force):
+        raise InvalidParameterError(f"grip_force must be a positive number (N), got {force!r}", field="grip_force")
     mu = spec.friction if friction is None else float(friction)
-    mass, com, inertia, mass_note = _mass_properties(mesh, float(density))
+    mass, com, inertia, mass_note = _mass_properties(
+        mesh, None if density is None else float(density), None if mass_kg is None else float(mass_kg)
+    )
     pieces, geometry, note = _decompose(mesh, constants, seed)
     notes = [n for n in (note, mass_note) if n]
-    model = mujoco.MjModel.from_xml_string(_xml(pieces, spec, mu, mass, com, inertia, constants))
+    model = mujoco.MjModel.from_xml_string(_xml(pieces, spec, mu, mass, com, inertia, constants, float(force)))
     return SimPart(
         model=model,
         spec=spec,
@@ -328,7 +495,11 @@ def prepare_part(
         note="; ".join(notes) or None,
         vertices=np.asarray(mesh.vertices, dtype=np.float64),
         constants=constants,
+        grip_force=float(force),
+        inertia=inertia,
+        hulls=pieces,
     )
+
 
 
 # --------------------------------------------------------------------------------------------------------------------
@@ -351,14 +522,22 @@ class _Grasp:
     """The state of one simulated grasp on its own MjData."""
 
     def __init__(
-        self, sim: SimPart, T_object_grasp: np.ndarray, width: float, inside: bool, rng: np.random.Generator
+        self,
+        sim: SimPart,
+        T_object_grasp: np.ndarray,
+        width: float,
+        inside: bool,
+        rng: np.random.Generator,
+        perturbation: Perturbation = NOMINAL,
     ) -> None:
         import mujoco
 
         self.mj = mujoco
         self.sim = sim
         self.c = sim.constants
-        m = sim.model
+        self.p = perturbation
+        self.mass = sim.mass * perturbation.mass_scale
+        m = sim.model_for(perturbation)
         self.m = m
         self.d = mujoco.MjData(m)
         self.part_body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "part")
@@ -434,7 +613,7 @@ class _Grasp:
             return SimResult(False, "collision", 0.0, 0.0, 0)
         d.qvel[:] = 0.0
         mj.mj_forward(m, d)
-        d.ctrl[:] = -c.grip_force if self.inside else c.grip_force
+        d.ctrl[:] = -self.sim.grip_force if self.inside else self.sim.grip_force
         mj.mj_step(m, d, nstep=max(1, int(round(c.close_time / c.timestep))))
         n0, n1, _ = self._contacts()
         if n0 == 0 or n1 == 0:
@@ -446,7 +625,7 @@ class _Grasp:
         dt = c.timestep * c.check_steps
         for a in self._loads(dt):
             # the load is constant over one check interval (a few ms, short against the shake period)
-            d.xfrc_applied[self.part_body, :3] = self.sim.mass * a
+            d.xfrc_applied[self.part_body, :3] = self.mass * a
             mj.mj_step(m, d, nstep=c.check_steps)
             p, R = self._part_pose()
             slip = max(slip, float(np.linalg.norm(R @ self.midpoint_object + p - mid_ref)))
@@ -462,28 +641,50 @@ class _Grasp:
 
     def _loads(self, dt: float):
         """Acceleration felt by the part (gravity minus the gripper's acceleration), grasp frame, per interval."""
-        c = self.c
+        c, p = self.c, self.p
         g = np.array([0.0, 0.0, c.gravity])
         n_ramp = max(1, int(round(c.lift_time / dt)))
         for k in range(n_ramp):  # lifting along -Z with a growing acceleration loads the part along +Z
             yield g + np.array([0.0, 0.0, c.lift_acceleration]) * (k + 1) / n_ramp
-        for _ in range(int(round(c.hold_time / dt))):
+        n_hold = int(round(c.hold_time / dt))
+        for _ in range(n_hold):
             yield g
+        target = np.asarray(p.gravity, dtype=np.float64)
+        angle = math.acos(min(1.0, max(-1.0, float(target[2]))))
+        if angle > 1e-6:  # the robot turns the part: gravity swings from +Z to the target about a fixed axis
+            axis = np.cross([0.0, 0.0, 1.0], target)
+            axis = np.array([1.0, 0.0, 0.0]) if np.linalg.norm(axis) < 1e-9 else axis / np.linalg.norm(axis)
+            n_turn = max(1, int(round(c.turn_time * angle / (math.pi / 2) / dt)))
+            for k in range(n_turn):
+                yield _rotation(axis, angle * (k + 1) / n_turn) @ g
+            g = c.gravity * target
+            for _ in range(n_hold):
+                yield g
+        accel = c.shake_acceleration if p.shake_acceleration is None else p.shake_acceleration
+        directions = c.shake_directions if p.shake_directions is None else p.shake_directions
         n_shake = max(1, int(round(1.0 / c.shake_frequency / dt)))
-        for v in c.shake_directions:
+        for v in directions:
             u = np.asarray(v, dtype=np.float64) / np.linalg.norm(v)
             for k in range(n_shake):
-                yield g - u * (c.shake_acceleration * math.sin(2 * math.pi * (k + 0.5) / n_shake))
+                yield g - u * (accel * math.sin(2 * math.pi * (k + 0.5) / n_shake))
 
 
 def simulate_grasp(
-    sim: SimPart, T_object_grasp: np.ndarray, width: float, *, inside: bool = False, seed: int = 0, key: int = 0
+    sim: SimPart,
+    T_object_grasp: np.ndarray,
+    width: float,
+    *,
+    inside: bool = False,
+    seed: int = 0,
+    key: int = 0,
+    perturbation: Perturbation | None = None,
 ) -> SimResult:
     """Simulate one grasp (pose (4, 4) in the object frame, contact distance `width` m; `inside`: the fingers open
-    outwards onto the contacts). `key` (e.g. the candidate index) and `seed` pick the placement error, so a grasp's
-    outcome does not depend on what else runs."""
+    outwards onto the contacts) under `perturbation` (None: the nominal simulation). `key` (e.g. the candidate index)
+    and `seed` pick the placement error, the same under every perturbation, so a grasp's outcome does not depend on
+    what else runs."""
     rng = np.random.default_rng([int(seed), int(key)])
-    return _Grasp(sim, T_object_grasp, float(width), inside, rng).run()
+    return _Grasp(sim, T_object_grasp, float(width), inside, rng, perturbation or NOMINAL).run()
 
 
 def simulate_grasps(
@@ -495,25 +696,56 @@ def simulate_grasps(
     keys: np.ndarray | None = None,
     workers: int | None = None,
     inside: np.ndarray | None = None,
+    perturbation: Perturbation | None = None,
 ) -> list[SimResult]:
-    """Simulate grasps (poses (n, 4, 4), widths (n,), inside (n,) bool or None) in parallel threads; results in
-    input order."""
+    """Simulate grasps (poses (n, 4, 4), widths (n,), inside (n,) bool or None) in parallel threads under one
+    perturbation (None: nominal); results in input order."""
+    out = simulate_perturbed(
+        sim, poses, widths, [perturbation or NOMINAL], seed=seed, keys=keys, workers=workers, inside=inside
+    )
+    return [row[0] for row in out]
+
+
+def simulate_perturbed(
+    sim: SimPart,
+    poses: np.ndarray,
+    widths: np.ndarray,
+    perturbations,
+    *,
+    seed: int = 0,
+    keys: np.ndarray | None = None,
+    workers: int | None = None,
+    inside: np.ndarray | None = None,
+) -> list[list[SimResult]]:
+    """Simulate every grasp (poses (n, 4, 4), widths (n,)) under every perturbation (a sequence of p), all pairs in
+    one thread pool; `out[i][j]` is grasp i under perturbation j. A grasp holds under the perturbations when every
+    `out[i][j].success`."""
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
     widths = np.asarray(widths, dtype=np.float64).reshape(-1)
     keys = np.arange(len(poses)) if keys is None else np.asarray(keys).reshape(-1)
     n = len(poses)
     inside = np.zeros(n, dtype=bool) if inside is None else np.asarray(inside, dtype=bool).reshape(-1)
-    if n == 0:
-        return []
+    members = list(perturbations)
+    if n == 0 or not members:
+        return [[] for _ in range(n)]
+    for p in members:  # build the perturbed models before the threads share them
+        sim.model_for(p)
+    jobs = [(i, j) for i in range(n) for j in range(len(members))]
 
-    def one(i: int) -> SimResult:
-        return simulate_grasp(sim, poses[i], widths[i], inside=bool(inside[i]), seed=seed, key=int(keys[i]))
+    def one(job: tuple[int, int]) -> SimResult:
+        i, j = job
+        return simulate_grasp(
+            sim, poses[i], widths[i], inside=bool(inside[i]), seed=seed, key=int(keys[i]), perturbation=members[j]
+        )
 
-    workers = min(n, workers or os.cpu_count() or 1)
+    workers = min(len(jobs), workers or os.cpu_count() or 1)
     if workers <= 1:
-        return [one(i) for i in range(n)]
-    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="graspgen-sim") as pool:
-        return list(pool.map(one, range(n)))
+        flat = [one(job) for job in jobs]
+    else:
+        with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="graspgen-sim") as pool:
+            flat = list(pool.map(one, jobs))
+    m = len(members)
+    return [flat[i * m : (i + 1) * m] for i in range(n)]
 
 
 def summarise(results: list[SimResult]) -> dict[str, Any]:

@@ -20,8 +20,10 @@ GRIPPER = {
     "friction": 0.5,
     "pregrasp_clearance": 0.02,
     "palm_depth": 0.02,
+    "grip_force": 20.0,
 }
 SPEC = GripperSpec.from_dict(GRIPPER)
+STEEL = 7850.0
 
 
 def _pose(mid, axis, roll_rad=np.pi) -> np.ndarray:
@@ -30,12 +32,12 @@ def _pose(mid, axis, roll_rad=np.pi) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def box_sim():
-    return physics.prepare_part(trimesh.creation.box(extents=(0.04, 0.03, 0.02)), SPEC)
+    return physics.prepare_part(trimesh.creation.box(extents=(0.04, 0.03, 0.02)), SPEC, density=STEEL)
 
 
 def test_box_model(box_sim):
     assert box_sim.geometry == "convex" and box_sim.pieces == 1 and box_sim.note is None
-    assert box_sim.mass == pytest.approx(0.04 * 0.03 * 0.02 * physics.DEFAULT_DENSITY)
+    assert box_sim.mass == pytest.approx(0.04 * 0.03 * 0.02 * STEEL)
     assert np.allclose(box_sim.center_of_mass, 0.0, atol=1e-12)
 
 
@@ -65,7 +67,7 @@ def test_palm_hitting_the_part_on_the_way_in_is_a_collision():
     # a grasp across the 20 mm height of a 60 mm plate, approaching from the plate's middle: the palm (and the
     # fingers) would have to pass through the plate
     plate = trimesh.creation.box(extents=(0.06, 0.06, 0.02))
-    sim = physics.prepare_part(plate, SPEC)
+    sim = physics.prepare_part(plate, SPEC, density=STEEL)
     T = _pose([0, 0, 0], [0, 0, 1], roll_rad=0.0)
     assert abs(T[2, 2]) < 1e-9  # approach along the plate
     r = physics.simulate_grasp(sim, T, 0.02)
@@ -74,7 +76,7 @@ def test_palm_hitting_the_part_on_the_way_in_is_a_collision():
 
 def test_low_friction_heavy_part_is_not_held():
     heavy = trimesh.creation.box(extents=(0.04, 0.04, 0.025))  # 0.31 kg of steel, low enough for the palm
-    sim = physics.prepare_part(heavy, SPEC, friction=0.05)  # 2 x 0.05 x 20 N = 2 N < 3.1 N weight
+    sim = physics.prepare_part(heavy, SPEC, friction=0.05, density=STEEL)  # 2 x 0.05 x 20 N = 2 N < 3.1 N weight
     r = physics.simulate_grasp(sim, _pose([0, 0, 0], [1, 0, 0]), 0.04)
     assert not r.success and r.reason in ("dropped", "slipped")
     assert r.slip_mm > physics.SIM.slip_limit * 1e3
@@ -104,11 +106,11 @@ def test_convex_decomposition_keeps_the_hole_that_the_hull_fills(monkeypatch):
         {**GRIPPER, "finger_width": 0.008, "finger_thickness": 0.004, "palm_depth": 0.0, "pregrasp_clearance": 0.004}
     )
     T = _pose([0.02, 0, 0], [1, 0, 0], roll_rad=0.0)  # across the wall, approaching along the ring's axis
-    sim = physics.prepare_part(ring, slim)
+    sim = physics.prepare_part(ring, slim, density=STEEL)
     assert sim.geometry == "coacd" and sim.pieces > 1
     assert physics.simulate_grasp(sim, T, 0.02).success
     monkeypatch.setattr(physics, "_decompose", lambda mesh, c, seed: ([mesh.convex_hull], "convex-hull", "hull"))
-    hull = physics.prepare_part(ring, slim)
+    hull = physics.prepare_part(ring, slim, density=STEEL)
     assert hull.geometry == "convex-hull" and hull.note == "hull"
     assert physics.simulate_grasp(hull, T, 0.02).reason == "collision"
 
@@ -194,7 +196,7 @@ def test_inside_grasp_opens_onto_a_bore():
     slim = GripperSpec.from_dict(
         {**GRIPPER, "finger_width": 0.008, "finger_thickness": 0.004, "palm_depth": 0.0, "pregrasp_clearance": 0.004}
     )
-    sim = physics.prepare_part(ring, slim)
+    sim = physics.prepare_part(ring, slim, density=STEEL)
     T = _pose([0, 0, 0], [1, 0, 0], roll_rad=0.0)  # approach along the ring's axis
     width = 0.04 * np.cos(np.pi / 96)  # the bore's flat-to-flat width at y = 0 is a little under 40 mm
     assert physics.simulate_grasp(sim, T, width, inside=True).success
@@ -242,3 +244,144 @@ def test_a_two_gram_pin_is_held_without_spinning_out(shared_meshes):
     res = physics.simulate_grasps(sim, _poses(c, idx), c.widths[idx], keys=idx)
     assert len(res) == 6
     assert all(r.success and r.rotation_deg < 10.0 for r in res), res
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# the real mass and grip force (issue 14.5) and perturbations
+
+
+def _part_body(sim):
+    import mujoco
+
+    return mujoco.mj_name2id(sim.model, mujoco.mjtObj.mjOBJ_BODY, "part")
+
+
+def test_mass_kg_sets_the_model_mass_and_scales_the_inertia_of_the_shape():
+    box = trimesh.creation.box(extents=(0.04, 0.03, 0.02))
+    by_mass = physics.prepare_part(box, SPEC, mass_kg=0.2)
+    by_density = physics.prepare_part(box, SPEC, density=STEEL)
+    b = _part_body(by_mass)
+    assert by_mass.mass == pytest.approx(0.2)
+    assert by_mass.model.body_mass[b] == pytest.approx(0.2)
+    steel_mass = 0.04 * 0.03 * 0.02 * STEEL
+    assert by_density.model.body_mass[b] == pytest.approx(steel_mass)
+    # same shape, another mass: the inertia scales with the mass; a 40 x 30 x 20 mm box's own inertia about z
+    ratio = 0.2 / steel_mass
+    assert np.allclose(by_mass.model.body_inertia[b], by_density.model.body_inertia[b] * ratio, rtol=1e-6)
+    izz = 0.2 * (0.04**2 + 0.03**2) / 12
+    assert sorted(by_mass.model.body_inertia[b])[-1] == pytest.approx(izz, rel=1e-6)
+    assert by_mass.describe()["mass_kg"] == pytest.approx(0.2) and by_mass.describe()["grip_force_n"] == 20.0
+
+
+def test_validation_without_mass_or_grip_force_is_refused():
+    box = trimesh.creation.box(extents=(0.02, 0.02, 0.02))
+    with pytest.raises(graspgen.InvalidParameterError, match="mass") as e:
+        physics.prepare_part(box, SPEC)
+    assert e.value.field == "mass_kg"
+    with pytest.raises(graspgen.InvalidParameterError, match="not both"):
+        physics.prepare_part(box, SPEC, mass_kg=0.1, density=STEEL)
+    with pytest.raises(graspgen.InvalidParameterError, match="mass_kg"):
+        physics.prepare_part(box, SPEC, mass_kg=0.0)
+    forceless = GripperSpec.from_dict({k: v for k, v in GRIPPER.items() if k != "grip_force"})
+    assert forceless.grip_force is None
+    with pytest.raises(graspgen.InvalidParameterError, match="grip force") as e:
+        physics.prepare_part(box, forceless, mass_kg=0.1)
+    assert e.value.field == "grip_force"
+    with pytest.raises(graspgen.InvalidParameterError, match="grip_force"):
+        physics.prepare_part(box, forceless, mass_kg=0.1, grip_force=-5.0)
+
+
+def test_grip_force_keyword_overrides_the_gripper_and_drives_the_motors():
+    box = trimesh.creation.box(extents=(0.02, 0.02, 0.02))
+    sim = physics.prepare_part(box, SPEC, mass_kg=0.1, grip_force=35.0)
+    assert sim.grip_force == 35.0
+    assert np.allclose(sim.model.actuator_ctrlrange, [[-35.0, 35.0], [-35.0, 35.0]])
+    assert np.allclose(physics.prepare_part(box, SPEC, mass_kg=0.1).model.actuator_ctrlrange[:, 1], 20.0)
+
+
+def test_a_part_too_heavy_for_the_grip_force_drops_and_a_lighter_one_is_held():
+    # 2 x 0.5 x 20 N = 20 N of friction: 0.2 kg (2 N, 2.6 N while lifting) is held, 2.5 kg (25 N) is not
+    box = trimesh.creation.box(extents=(0.04, 0.03, 0.02))
+    T = _pose([0, 0, 0], [1, 0, 0])
+    assert physics.simulate_grasp(physics.prepare_part(box, SPEC, mass_kg=0.2), T, 0.04).success
+    r = physics.simulate_grasp(physics.prepare_part(box, SPEC, mass_kg=2.5), T, 0.04)
+    assert not r.success and r.reason in ("dropped", "slipped")
+
+
+def test_perturbation_is_validated_and_normalised():
+    p = physics.Perturbation("g", gravity=(0, 0, -3))
+    assert p.gravity == (0.0, 0.0, -1.0)
+    for bad in (dict(gravity=(0, 0, 0)), dict(mass_scale=0.0), dict(friction=-0.1), dict(shake_directions=((0, 0),))):
+        with pytest.raises(graspgen.InvalidParameterError):
+            physics.Perturbation("bad", **bad)
+
+
+def test_the_standard_perturbation_set():
+    ps = physics.perturbation_set(0)
+    assert ps == physics.perturbation_set(0) and ps != physics.perturbation_set(1)
+    names = [p.name for p in ps]
+    assert len(set(names)) == len(ps) == 11
+    assert sorted(p.mass_scale for p in ps if p.name.startswith("mass")) == [0.5, 1.5]
+    assert sorted(p.friction for p in ps if p.name.startswith("friction")) == [0.4, 0.6]
+    gravity = {p.gravity for p in ps if p.name.startswith("gravity")}
+    assert gravity == {(0.0, 0.0, -1.0), (1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0)}
+    for p in ps:
+        assert 0.5 <= p.mass_scale <= 1.5 and (p.friction is None or 0.4 <= p.friction <= 0.6)
+        if p.shake_directions is not None:  # lateral: across gravity, 1 g
+            assert p.shake_acceleration == pytest.approx(9.81)
+            assert all(abs(np.dot(u, p.gravity)) < 1e-9 for u in p.shake_directions)
+
+
+def test_perturbed_models_change_mass_and_friction_only():
+    box = trimesh.creation.box(extents=(0.04, 0.03, 0.02))
+    sim = physics.prepare_part(box, SPEC, mass_kg=0.2)
+    b = _part_body(sim)
+    heavy = sim.model_for(physics.Perturbation("m", mass_scale=1.5, friction=0.4))
+    assert heavy.body_mass[b] == pytest.approx(0.3)
+    assert np.allclose(heavy.body_inertia[b], sim.model.body_inertia[b] * 1.5)
+    assert np.allclose(heavy.geom_friction[:, 0], 0.4) and np.allclose(sim.model.geom_friction[:, 0], 0.5)
+    assert sim.model_for(physics.Perturbation("m", mass_scale=1.5, friction=0.4)) is heavy  # built once
+    assert sim.model_for(physics.NOMINAL) is sim.model
+
+
+def test_a_heavy_part_held_far_from_its_centre_of_mass_turns_out_of_the_fingers():
+    # a 200 mm bar of 0.5 kg: at its centre the load is friction's (6.4 N of 20 N); 80 mm out, 0.39 N m turns it
+    # about the closing axis against the pads' torsional friction only
+    bar = physics.prepare_part(trimesh.creation.box(extents=(0.2, 0.03, 0.02)), SPEC, mass_kg=0.5)
+    assert physics.simulate_grasp(bar, _pose([0, 0, 0], [0, 1, 0]), 0.03).success
+    far = physics.simulate_grasp(bar, _pose([0.08, 0, 0], [0, 1, 0]), 0.03)
+    assert not far.success and far.rotation_deg > physics.SIM.rotation_limit_deg
+
+
+@pytest.mark.slow
+def test_gravity_across_the_closing_axis_turns_a_part_that_gravity_along_it_does_not():
+    """A 200 mm tall 0.5 kg bar held 88 mm above its centre of mass, top-down: the pick (+Z) puts no moment on it;
+    turned so that gravity runs along the closing axis (+-X) the moment is about an axis in the pads' plane, carried
+    by the pads' pressure; across (+-Y) it is about the closing axis, carried by torsional friction only. The half turn
+    to -Z (the part standing on the gripper) is about the closing axis and passes through +Y, so it fails too."""
+    tall = physics.prepare_part(trimesh.creation.box(extents=(0.03, 0.03, 0.2)), SPEC, mass_kg=0.5)
+    T = _pose([0, 0, 0.088], [1, 0, 0])
+    out = physics.simulate_perturbed(
+        tall,
+        T[None],
+        [0.03],
+        [physics.NOMINAL, *(p for p in physics.perturbation_set(0) if p.name.startswith("gravity"))],
+    )[0]
+    by = {p: r for p, r in zip(["+Z", "-Z", "+X", "-X", "+Y", "-Y"], out, strict=True)}
+    assert all(by[k].success for k in ("+Z", "+X", "-X")), by
+    assert not any(by[k].success for k in ("+Y", "-Y", "-Z")), by
+    assert by["+Y"].rotation_deg > physics.SIM.rotation_limit_deg
+
+
+def test_simulate_perturbed_matches_one_by_one_and_keeps_the_placement_error(box_sim):
+    poses = np.stack([_pose([0, 0, 0], [1, 0, 0]), _pose([0.005, 0, 0], [0, 1, 0])])
+    widths = np.array([0.04, 0.03])
+    members = [physics.NOMINAL, physics.Perturbation("f", friction=0.4), physics.Perturbation("g", gravity=(0, 1, 0))]
+    grid = physics.simulate_perturbed(box_sim, poses, widths, members, seed=3, keys=[5, 9], workers=2)
+    assert [len(row) for row in grid] == [3, 3]
+    for i in range(2):
+        for j, p in enumerate(members):
+            one = physics.simulate_grasp(box_sim, poses[i], widths[i], seed=3, key=[5, 9][i], perturbation=p)
+            assert grid[i][j] == one
+    assert physics.simulate_grasps(box_sim, poses, widths, seed=3, keys=[5, 9]) == [row[0] for row in grid]
+    assert grid[0][0] != grid[0][2]  # the turn moves the part a little on its pads
