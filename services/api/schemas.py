@@ -185,8 +185,10 @@ class JobRequest(_NoNul):
         None,
         description="generate: any of points, friction, safety_factor, rolls, k1, k2, inside, collision, seed; "
         "cluster: k1, k2, seed. Both: validate (bool, simulate every exported grasp in MuJoCo and repair failures), "
-        "select ('medoid' | 'best-near-medoid'), density (part density for validation, kg/m^3, 1..100000); "
-        "docs/QUALITY.md. A cluster job does not inherit these from its source set.",
+        "select ('medoid' | 'best-near-medoid'), density (part density, kg/m^3, 1..100000); docs/QUALITY.md. "
+        "generate also: mass_kg (kg; default: the object version's mass_kg unless density is given), accel (m/s^2), "
+        "hold ('any' | 'off'), position_tolerance (m): criterion (e), CONTRACT.md. A cluster job does not inherit "
+        "validate and select from its source set.",
         examples=[
             {"points": 10000, "k1": 16, "k2": 4, "validate": True, "select": "best-near-medoid", "density": 7850}
         ],
@@ -271,12 +273,34 @@ class JobOut(BaseModel):
     attempts: int = 0
     cancel_requested: bool = False
     parent: uuid.UUID | None = None
-    summary: dict[str, int] | None = Field(None, description="bulk: children per state")
+    summary: dict[str, int] | None = Field(
+        None, description="bulk: children per state; the parent is `succeeded` only when every item succeeded"
+    )
     items: list[JobItem] | None = Field(None, description="bulk: every item's state")
     created_at: datetime
     started_at: datetime | None = None
     finished_at: datetime | None = None
     links: dict[str, str]
+
+
+class JobSummary(BaseModel):
+    id: uuid.UUID
+    kind: str
+    state: Literal["queued", "running", "succeeded", "failed", "cancelled"]
+    stage: str | None
+    progress: float = Field(ge=0, le=1)
+    grasp_set: int | None = None
+    error: dict[str, Any] | None = None
+    object: str | None = None
+    gripper: str | None = None
+    created_by: str = Field(description="name of the token that submitted it")
+    created_at: datetime
+    finished_at: datetime | None = None
+    links: dict[str, str]
+
+
+class JobPage(Page):
+    items: list[JobSummary]
 
 
 # -- grasp sets -------------------------------------------------------------------------------------------------------

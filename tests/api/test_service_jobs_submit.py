@@ -49,6 +49,11 @@ def test_submit_commits_the_row_and_queues_one_message(pg_service, pair):
         "inside": False,
         "collision": "swept",
         "seed": 0,
+        "mass_kg": None,
+        "density": None,
+        "accel": 9.81,
+        "hold": "any",
+        "position_tolerance": 0.001,
     }
     assert queued_messages(pg_service) == before + 1
     got = pg_service.get(r.headers["location"])

@@ -107,11 +107,12 @@ def test_quality_params_are_stored(pg_service, pair):
     assert r.status_code == 202, r.text
     stored = r.json()["params"]
     assert stored["validate"] is True and stored["select"] == "best-near-medoid" and stored["density"] == 2700.0
-    # defaults are not stored: the same inputs keep the params (and grasp set identity) they had before
+    # default quality options are not stored; density is a core parameter (graspgen.Params), None by default
     r = pg_service.post(
         "/v1/jobs", json={"object": obj, "gripper": grip, "params": {"points": 600, "select": "medoid"}}
     )
-    assert r.status_code == 202 and not {"validate", "select", "density"} & set(r.json()["params"])
+    assert r.status_code == 202 and not {"validate", "select"} & set(r.json()["params"])
+    assert r.json()["params"]["density"] is None
 
 
 def test_bulk_item_with_bad_quality_param_fails_alone(pg_service, pair):

@@ -164,7 +164,7 @@ def test_bulk_one_bad_item_fails_alone(stack, pair):
     r = svc.post("/v1/bulk-jobs", json={"items": items})
     assert r.status_code == 202
     parent = svc.wait_job(r.json()["id"], timeout=180)
-    assert parent["state"] == "succeeded"
+    assert parent["state"] == "failed" and parent["error"]["detail"] == "1 of 3 items failed"  # never "succeeded"
     assert [i["state"] for i in parent["items"]] == ["succeeded", "failed", "succeeded"]
     assert parent["summary"]["succeeded"] == 2 and parent["summary"]["failed"] == 1 and parent["progress"] == 1.0
     assert parent["items"][1]["error"]["code"] == "unknown-object"

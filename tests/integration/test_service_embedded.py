@@ -106,7 +106,8 @@ def test_graspgen_serve_embedded_whole_flow(tmp_path):
                 },
             ).json()
             parent = wait_job(c, bulk["id"])
-            assert parent["state"] == "succeeded" and [i["state"] for i in parent["items"]] == ["succeeded", "failed"]
+            assert parent["state"] == "failed" and [i["state"] for i in parent["items"]] == ["succeeded", "failed"]
+            assert parent["error"]["code"] == "items-failed" and parent["summary"]["failed"] == 1
 
         # the scripted demo client against the same server
         demo = subprocess.run(

@@ -6,11 +6,11 @@ failed request leaves the database as it was.
 
 from __future__ import annotations
 
-import math
 import uuid
+from datetime import datetime
 from typing import Any
 
-from sqlalchemy import delete, func, select
+from sqlalchemy import and_, delete, func, or_, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
@@ -31,22 +31,30 @@ from services.common.models import (
 from services.common.tokens import Principal
 from services.worker.dispatch import Dispatcher, DispatchError
 
+from ..pagination import decode_cursor, encode_cursor
 from ..problems import ApiError
 from ..schemas import BulkRequest, JobRequest
 
-__all__ = ["submit_job", "submit_bulk", "job_out", "get_job", "cancel_job", "CLUSTER_PARAMS", "QUALITY_PARAMS"]
+__all__ = [
+    "submit_job",
+    "submit_bulk",
+    "job_out",
+    "get_job",
+    "list_jobs",
+    "cancel_job",
+    "CLUSTER_PARAMS",
+    "QUALITY_PARAMS",
+]
 
 CLUSTER_PARAMS = ("k1", "k2", "seed")
 #: job params beyond graspgen.Params (docs/QUALITY.md): keyword arguments of graspgen.generate / recluster
-QUALITY_PARAMS = ("validate", "select", "density")
-#: the core's accepted part density range, kg/m^3 (graspgen.pipeline checks the same)
-DENSITY_RANGE = (1.0, 100_000.0)
+QUALITY_PARAMS = ("validate", "select")
 
 
 def split_quality(given: dict[str, Any] | None) -> tuple[dict[str, Any], dict[str, Any]]:
     """(core params, quality params) of a job's params; quality params are checked here so that a bad value is a
-    422 at submission. Only non-default values are kept, so a job without them has the same params (and params_key)
-    as before: `validate` only when true, `select` only when not "medoid", `density` only with `validate`."""
+    422 at submission. Only non-default values are kept: `validate` only when true, `select` only when not "medoid".
+    `density` is a core parameter (graspgen.Params: criterion (e) and validation)."""
     from graspgen.quality import SELECT_MODES
 
     core = dict(given or {})
@@ -57,23 +65,9 @@ def split_quality(given: dict[str, Any] | None) -> tuple[dict[str, Any], dict[st
     select_ = q.get("select", "medoid")
     if not isinstance(select_, str) or select_ not in SELECT_MODES:
         raise InvalidParameterError(f"select must be one of {', '.join(SELECT_MODES)}, got {select_!r}", field="select")
-    density = q.get("density")
-    if density is not None:
-        lo, hi = DENSITY_RANGE
-        if (
-            isinstance(density, bool)
-            or not isinstance(density, (int, float))
-            or not math.isfinite(density)
-            or not lo <= density <= hi
-        ):
-            raise InvalidParameterError(
-                f"density must be a number between {lo:g} and {hi:g} kg/m^3, got {density!r}", field="density"
-            )
     out: dict[str, Any] = {}
     if validate:
         out["validate"] = True
-        if density is not None:
-            out["density"] = float(density)
     if select_ != "medoid":
         out["select"] = select_
     return core, out
@@ -103,8 +97,14 @@ def _gripper_version(session: Session, name: str, version: int | None) -> Grippe
     return v
 
 
-def _effective_params(given: dict[str, Any] | None, spec: dict[str, Any]) -> dict[str, Any]:
+def _effective_params(
+    given: dict[str, Any] | None, spec: dict[str, Any], mass_kg: float | None = None
+) -> dict[str, Any]:
+    """graspgen.Params with friction resolved from the gripper and the object version's mass when the job gives
+    neither mass_kg nor density: the stored params say exactly what the run used."""
     core, quality = split_quality(given)
+    if mass_kg is not None and core.get("mass_kg") is None and core.get("density") is None:
+        core["mass_kg"] = mass_kg
     p = Params.from_dict(core)  # InvalidParameterError -> 422
     return {**p.to_dict(friction=p.friction if p.friction is not None else float(spec["friction"])), **quality}
 
@@ -117,7 +117,7 @@ def _resolve_generate(session: Session, item: dict[str, Any]) -> dict[str, Any]:
     return {
         "object_version_id": ov.id,
         "gripper_version_id": gv.id,
-        "params": _effective_params(item.get("params"), gv.spec),
+        "params": _effective_params(item.get("params"), gv.spec, ov.mass_kg),
     }
 
 
@@ -131,17 +131,20 @@ def _resolve_cluster(session: Session, body: JobRequest) -> dict[str, Any]:
     if source is None:
         raise ApiError(422, "unknown-grasp-set", f"there is no grasp set {body.grasp_set}", field="grasp_set")
     given = dict(body.params or {})
-    unknown = sorted(set(given) - set(CLUSTER_PARAMS) - set(QUALITY_PARAMS))
+    unknown = sorted(set(given) - set(CLUSTER_PARAMS) - set(QUALITY_PARAMS) - {"density"})
     if unknown:
         raise InvalidParameterError(
             "a cluster job takes only k1, k2, seed, validate, select and density; not " + ", ".join(unknown),
             field=unknown[0],
         )
     given, quality = split_quality(given)
+    Params.from_dict(given)  # a bad k1, k2, seed or density is named before anything about the source set
     if source.candidates_key is None:
         raise ApiError(422, "no-candidates", f"grasp set {source.id} has no stored candidates", field="grasp_set")
     # quality options are the cluster job's own, not inherited from the source set
     base, _ = split_quality(source.params)
+    if "density" in given:
+        base.pop("mass_kg", None)  # a density for validation replaces the source's mass (one of the two)
     merged = {**Params.from_dict({**base, **given}).to_dict(), **quality}
     return {
         "object_version_id": source.object_version_id,
@@ -334,6 +337,7 @@ def job_out(session: Session, job: Job) -> dict[str, Any]:
         out["progress"] = round(agg.progress, 4)
         out["state"] = agg.state(cancel_requested=job.cancel_requested)
         out["stage"] = f"{agg.done}/{agg.total} items done"
+        out["error"] = agg.error()
         out["items"] = [
             {
                 "index": c.item_index,
@@ -350,6 +354,55 @@ def job_out(session: Session, job: Job) -> dict[str, Any]:
             for c in children
         ]
     return out
+
+
+def list_jobs(
+    session: Session, principal: Principal, *, state: str | None, kind: str | None, cursor: str | None, limit: int
+) -> dict[str, Any]:
+    """The caller's jobs (every job for an admin token), newest first; bulk items are listed in their parent."""
+    key = decode_cursor(cursor, (str, str))
+    q = select(Job).where(Job.parent_id.is_(None))
+    if not principal.has("admin"):
+        q = q.where(Job.created_by == principal.name)
+    if state:
+        q = q.where(Job.state == state)
+    if kind:
+        q = q.where(Job.kind == kind)
+    if key:
+        try:
+            at, jid = datetime.fromisoformat(key[0]), uuid.UUID(key[1])
+        except ValueError:
+            raise ApiError(422, "invalid-cursor", "the cursor is not one this endpoint issued") from None
+        if at.tzinfo is None:
+            raise ApiError(422, "invalid-cursor", "the cursor is not one this endpoint issued")
+        q = q.where(or_(Job.created_at < at, and_(Job.created_at == at, Job.id < jid)))
+    rows = session.execute(q.order_by(Job.created_at.desc(), Job.id.desc()).limit(limit + 1)).scalars().all()
+    more = len(rows) > limit
+    rows = rows[:limit]
+    nxt = encode_cursor([rows[-1].created_at.isoformat(), str(rows[-1].id)]) if more and rows else None
+    query = "".join(f"&{k}={v}" for k, v in (("state", state), ("kind", kind)) if v)
+    return {
+        "items": [
+            {
+                "id": j.id,
+                "kind": j.kind,
+                "state": j.state,
+                "stage": j.stage,
+                "progress": round(float(j.progress), 4),
+                "grasp_set": j.grasp_set_id,
+                "error": j.error,
+                "object": j.request.get("object"),
+                "gripper": j.request.get("gripper"),
+                "created_by": j.created_by,
+                "created_at": j.created_at,
+                "finished_at": j.finished_at,
+                "links": {"self": f"/v1/jobs/{j.id}"},
+            }
+            for j in rows
+        ],
+        "next_cursor": nxt,
+        "links": {"next": f"/v1/jobs?cursor={nxt}&limit={limit}{query}" if nxt else None},
+    }
 
 
 def cancel_job(session: Session, dispatcher: Dispatcher, principal: Principal, job_id: uuid.UUID) -> Job:

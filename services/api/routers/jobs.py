@@ -3,13 +3,13 @@ from __future__ import annotations
 import uuid
 from typing import Annotated
 
-from fastapi import APIRouter, Header, Path, Response
+from fastapi import APIRouter, Header, Path, Query, Response
 
-from services.common.models import TERMINAL_STATES
+from services.common.models import JOB_KINDS, JOB_STATES, TERMINAL_STATES
 
 from ..crud import jobs as crud
 from ..deps import DispatcherDep, ReadDep, ReadSessionDep, SessionDep, SettingsDep, WriteDep
-from ..schemas import BulkRequest, JobOut, JobRequest
+from ..schemas import BulkRequest, JobOut, JobPage, JobRequest
 from . import problems
 
 router = APIRouter(prefix="/v1", tags=["jobs"])
@@ -80,6 +80,33 @@ def submit_bulk(
         session, dispatcher, principal, body, idempotency_key, max_items=settings.max_bulk_items
     )
     return _accepted(response, crud.job_out(session, job), replayed)
+
+
+@router.get(
+    "/jobs",
+    response_model=JobPage,
+    summary="List your jobs, newest first",
+    description="The jobs submitted with this token's name (every job for an admin token), filtered by `state` and "
+    "`kind`, paginated by cursor. Bulk items are not listed on their own: they are in their parent's `items`.",
+    responses=problems(422),
+)
+def list_jobs(
+    principal: ReadDep,
+    session: ReadSessionDep,
+    settings: SettingsDep,
+    state: Annotated[str | None, Query(pattern="^(" + "|".join(JOB_STATES) + ")$")] = None,
+    kind: Annotated[str | None, Query(pattern="^(" + "|".join(JOB_KINDS) + ")$")] = None,
+    cursor: str | None = None,
+    limit: Annotated[int | None, Query(ge=1)] = None,
+) -> dict:
+    return crud.list_jobs(
+        session,
+        principal,
+        state=state,
+        kind=kind,
+        cursor=cursor,
+        limit=min(limit or settings.page_size_default, settings.page_size_max),
+    )
 
 
 @router.get(

@@ -25,10 +25,11 @@ _MEDIA = {"stl": "model/stl", "obj": "model/obj", "glb": "model/gltf-binary", "p
     summary="Upload a part (mesh or point cloud) under a name",
     description="Multipart upload. The same bytes with the same units under the same name return the existing "
     "version with 200; anything else becomes the next version (201). The file is checked with graspgen's "
-    "loader (units, size plausibility, geometry) before it is stored.",
+    "loader (units, size plausibility, geometry) before it is stored. `mass_kg` is stored on the version; the same "
+    "bytes with a different mass are a 409.",
     responses={
         200: {"description": "Existing version (identical upload)", "model": ObjectVersionOut},
-        **problems(413, 422),
+        **problems(409, 413, 422),
     },
 )
 def upload_object(
@@ -41,9 +42,21 @@ def upload_object(
     name: Annotated[str, Form(description="slug", examples=["ring-screw"])],
     units: Annotated[str, Form(description="mm, cm, m or in", examples=["mm"])],
     format: Annotated[str | None, Form(description="file type; default: the file name's extension")] = None,
+    mass_kg: Annotated[
+        float | None,
+        Form(description="the part's mass in kg (> 0): jobs without mass_kg or density use it for criterion (e)"),
+    ] = None,
 ) -> dict:
     out, created = crud.upload_object(
-        session, storage, settings, name=name, units=units, fmt=format, filename=file.filename, stream=file.file
+        session,
+        storage,
+        settings,
+        name=name,
+        units=units,
+        fmt=format,
+        filename=file.filename,
+        stream=file.file,
+        mass_kg=mass_kg,
     )
     response.status_code = 201 if created else 200
     response.headers["Location"] = out["links"]["self"]
