@@ -142,10 +142,8 @@ def downgrade() -> None:
     op.drop_index(op.f("ix_catalogue_pairs_gripper_id_change_seq"), table_name="catalogue_pairs")
     op.drop_table("catalogue_pairs")
     op.drop_table("change_counter")
-    with op.batch_alter_table("grasp_sets") as batch:
-        batch.drop_column("withdrawn_at")
     op.drop_index(op.f("ix_jobs_created_by_created_at"), table_name="jobs")
-    with op.batch_alter_table("jobs") as batch:
-        batch.drop_column("request_id")
-    with op.batch_alter_table("object_versions") as batch:
-        batch.drop_column("mass_kg")
+    # plain ALTER TABLE ... DROP COLUMN (SQLite >= 3.35 has it for columns without constraints): a batch copy of the
+    # table would have to drop it, which SQLite's enforced foreign keys refuse while other tables refer to its rows
+    for table, column in (("grasp_sets", "withdrawn_at"), ("jobs", "request_id"), ("object_versions", "mass_kg")):
+        op.execute(f"ALTER TABLE {table} DROP COLUMN {column}")
