@@ -1,0 +1,204 @@
+"""graspgen.client.Client against the real server, as a plant runs it: `graspgen serve` on PostgreSQL with a Celery
+worker on Redis, and `graspgen serve` in its embedded default (SQLite, in-process jobs), over HTTP on loopback.
+
+One flow per stack: upload, gripper, job (Idempotency-Key, wait honouring Retry-After), export, catalogue with its
+ETag cache (304 reuse, also from a cache directory after a restart of the client), release, pick (the same answer as
+graspgen.pick on the downloaded candidates), an empty pick with its reason, refusals as ProblemError, withdraw.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from services_conftest import (
+    GRIPPER,
+    PG_URL,
+    broker_settings,
+    cylinder_stl,
+    free_port,
+    redis_cleanup,
+    settings_env,
+    slug,
+    stop_process,
+    unique_name,
+    wait_for_log,
+    wait_http,
+    write_tokens_file,
+)
+
+import graspgen
+from graspgen.client import Client, ProblemError
+from graspgen.gripper import GripperSpec
+
+pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.xdist_group("client")]
+
+SMALL = {"points": 800, "k1": 4, "k2": 2}
+FLOOR = [{"point": [0, 0, 0], "normal": [0, 0, 1]}]
+DOWN = {"direction": [0, 0, -1], "max_angle_deg": 60}
+
+
+def _serve(env: dict[str, str], log: Path) -> tuple[subprocess.Popen, str]:
+    port = free_port()
+    with open(log, "wb") as out:
+        proc = subprocess.Popen(
+            [str(Path(sys.executable).with_name("graspgen")), "serve", "--port", str(port)],
+            env=env,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
+    try:
+        wait_for_log(log, "Uvicorn running", proc)
+        wait_http(f"http://127.0.0.1:{port}/healthz")
+    except Exception:
+        stop_process(proc)
+        raise
+    return proc, f"http://127.0.0.1:{port}"
+
+
+@pytest.fixture(scope="module")
+def postgres_stack(pg_schema, tmp_path_factory):
+    """`graspgen serve` and `graspgen worker` (subprocesses) on PostgreSQL and Redis, sharing a storage directory."""
+    root = tmp_path_factory.mktemp("client-pg")
+    tokens = write_tokens_file(root / "tokens.json")
+    broker = broker_settings()
+    values = dict(
+        database_url=PG_URL,
+        database_schema=pg_schema,
+        storage_dir=root / "var",
+        tokens_file=root / "tokens.json",
+        progress_interval_s=0.1,
+        **broker,
+    )
+    with open(root / "worker.log", "wb") as out:
+        worker = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "services.cli",
+                "worker",
+                "--concurrency",
+                "1",
+                "--hostname",
+                f"{unique_name('w')}@%h",
+            ],
+            env=settings_env(**values),
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
+    server = None
+    try:
+        wait_for_log(root / "worker.log", " ready.", worker)
+        server, url = _serve(settings_env(**values), root / "serve.log")
+        yield url, tokens["writer"]
+    finally:
+        if server is not None:
+            stop_process(server)
+        stop_process(worker)
+        redis_cleanup(broker["broker_key_prefix"])
+
+
+@pytest.fixture(scope="module")
+def embedded_stack(tmp_path_factory):
+    """`graspgen serve` with nothing configured: SQLite, local files, jobs in-process, a created admin token."""
+    root = tmp_path_factory.mktemp("client-embedded")
+    proc, url = _serve(settings_env(storage_dir=root / "var"), root / "serve.log")
+    try:
+        yield url, (root / "var" / "admin-token").read_text().strip()
+    finally:
+        stop_process(proc)
+
+
+@pytest.fixture(params=["postgres", "embedded"])
+def stack(request):
+    return request.getfixturevalue(f"{request.param}_stack")
+
+
+def test_plant_flow_through_the_client(stack, tmp_path):
+    url, token = stack
+    obj, grip = slug("ring"), slug("pgn")
+    with Client(url, token, cache_dir=tmp_path / "cache") as gg:
+        up = gg.upload_object(cylinder_stl(), name=obj, units="mm", filename="ring.stl")
+        assert up["version"] == 1
+        assert gg.upload_object(cylinder_stl(), name=obj, units="mm", filename="ring.stl")["version"] == 1
+        spec = {**GRIPPER, "name": grip}
+        assert gg.create_gripper(spec)["version"] == 1
+        assert gg.create_gripper(GripperSpec.from_dict(spec))["version"] == 1  # identical: the same version
+
+        job = gg.submit_job(obj, grip, params=SMALL, idempotency_key=f"plant-7-{obj}")
+        again = gg.submit_job(obj, grip, params=SMALL, idempotency_key=f"plant-7-{obj}")
+        assert again["id"] == job["id"] and job["state"] in ("queued", "running", "succeeded")
+        done = gg.wait(job, timeout=300)
+        assert done["state"] == "succeeded" and done["grasp_set"]
+        gs = done["grasp_set"]
+
+        export = gg.grasp_set(gs)
+        assert export["format"] == "graspgen.grasp_set/1" and export["grasps"]
+        from services.api.contract_schemas import GraspSetExport
+
+        GraspSetExport.model_validate(export)  # the typed document describes a real export
+
+        first = gg.catalogue(obj, grip)
+        assert (first.grasp_set, first.released, first.from_cache) == (gs, False, False)
+        second = gg.catalogue(obj, grip)
+        assert second.from_cache and second.export == first.export and second.etag == first.etag
+
+        assert gg.release(gs)["released"] == gs
+        released = gg.catalogue(obj, grip)
+        assert released.released and released.grasp_set == gs
+
+        T = np.array([[0, -1, 0, 0.4], [1, 0, 0, 0.1], [0, 0, 1, 0.015], [0, 0, 0, 1.0]])
+        flange = np.eye(4)
+        flange[2, 3] = -0.12
+        answer = gg.pick(T, object=obj, gripper=grip, approach=DOWN, planes=FLOOR, T_tcp_flange=flange, limit=20)
+        assert answer["grasp_set"] == gs and answer["grasps"], answer
+        assert answer["considered"] == int(gg.candidates(gs).free_rolls.sum())
+        local = graspgen.pick(
+            gg.candidates(gs),
+            T,
+            approach=DOWN,
+            planes=FLOOR,
+            T_tcp_flange=flange,
+            limit=20,
+            gripper=GripperSpec.from_dict(export["gripper"]),
+        )
+        assert [(g["candidate"], g["roll_index"]) for g in answer["grasps"]] == [
+            (g["candidate"], g["roll_index"]) for g in local.grasps
+        ]
+        np.testing.assert_allclose(
+            [g["T_world_flange"] for g in answer["grasps"]], [g["T_world_flange"] for g in local.grasps], atol=1e-12
+        )
+        for g in answer["grasps"]:
+            assert g["approach_angle_deg"] <= 60 + 1e-9
+            assert np.asarray(g["T_world_pregrasp"])[2, 3] > np.asarray(g["T_world_grasp"])[2, 3]  # retreat upwards
+
+        sunk = T.copy()
+        sunk[2, 3] = -0.3
+        empty = gg.pick(sunk, grasp_set=gs, approach=DOWN, planes=FLOOR)
+        assert empty["grasps"] == [] and empty["reason"]["planes"] + empty["reason"]["approach"] == empty["considered"]
+
+        with pytest.raises(ProblemError) as bad:
+            gg.pick(np.diag([1.0, 1.0, -1.0, 1.0]), grasp_set=gs)
+        assert bad.value.status == 422 and bad.value.problem["field"] == "T_world_object"
+
+    # a new client (a restarted plant cell) revalidates from its cache directory: 304, nothing downloaded again
+    with Client(url, token, cache_dir=tmp_path / "cache") as gg:
+        kept = gg.catalogue(obj, grip)
+        assert kept.from_cache and kept.released and kept.export == first.export
+        gg.withdraw(gs)
+        with pytest.raises(ProblemError) as gone:
+            gg.catalogue(obj, grip)
+        assert gone.value.status == 404
+        with pytest.raises(ProblemError) as unknown:
+            gg.pick(np.eye(4), object=slug("nope"), gripper=grip)
+        assert unknown.value.status == 404 and unknown.value.code == "not-found"
+
+
+def test_the_client_needs_no_token_to_fail_clearly(embedded_stack):
+    url, _ = embedded_stack
+    with Client(url, None) as gg, pytest.raises(ProblemError) as err:
+        gg.object("anything")
+    assert err.value.status == 401 and err.value.problem["code"] == "unauthorized"
