@@ -237,6 +237,23 @@ def pg_service(pg_schema, tmp_path_factory) -> Iterator[Service]:
     redis_cleanup(broker["broker_key_prefix"])
 
 
+@pytest.fixture(scope="session")
+def sqlite_service(tmp_path_factory) -> Iterator[Service]:
+    """The embedded default: a SQLite file and the in-process worker (jobs really run), with the test tokens."""
+    from fastapi.testclient import TestClient
+
+    from services.api.app import create_app
+    from services.common.migrate import upgrade
+    from services.common.settings import Settings
+
+    root = tmp_path_factory.mktemp("sqlite-service")
+    tokens = write_tokens_file(root / "tokens.json")
+    settings = Settings(storage_dir=root / "var", tokens_file=root / "tokens.json", max_upload_bytes=256 * 1024)
+    upgrade(settings)  # as `graspgen serve` does for its SQLite file
+    with TestClient(create_app(settings)) as client:
+        yield Service(client, settings, tokens)
+
+
 # -- S3-compatible storage: moto's server on loopback -----------------------------------------------------------------
 def free_port() -> int:
     import socket

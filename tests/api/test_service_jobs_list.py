@@ -132,3 +132,37 @@ def test_aggregate_states():
     )
     assert agg({"succeeded": 2}, 2, 1.0).error() is None
     assert agg({"failed": 1, "running": 1}, 2, 0.5).error() is None
+
+
+@pytest.mark.slow
+def test_embedded_default_runs_a_bulk_job_to_failed_lists_it_and_catalogues_the_results(sqlite_service):
+    """SQLite and the in-process worker: real jobs, the listing's keyset on SQLite, and the worker's catalogue
+    refresh."""
+    svc = sqlite_service
+    obj, grip = slug("emb"), slug("g")
+    assert svc.upload(obj).status_code == 201 and svc.gripper(grip).status_code == 201
+    small = {"points": 300, "k1": 2, "k2": 1}
+    single = svc.post("/v1/jobs", json={"object": obj, "gripper": grip, "params": {**small, "seed": 1}}).json()
+    items = [
+        {"object": obj, "gripper": grip, "params": {**small, "seed": 2}},
+        {"object": obj, "gripper": "no-such-gripper"},
+        {"object": obj, "gripper": grip, "params": {**small, "seed": 3}},
+    ]
+    bulk = svc.post("/v1/bulk-jobs", json={"items": items}).json()
+    assert svc.wait_job(single["id"])["state"] == "succeeded"
+    done = svc.wait_job(bulk["id"])
+    assert done["state"] == "failed" and done["error"]["detail"] == "1 of 3 items failed"
+    assert [i["state"] for i in done["items"]] == ["succeeded", "failed", "succeeded"]
+
+    listed = listing(svc, "/v1/jobs?limit=1", "writer")
+    assert [i["id"] for i in listed[:2]] == [bulk["id"], single["id"]]
+    assert bulk["id"] in {i["id"] for i in listing(svc, "/v1/jobs?state=failed", "writer")}
+    assert bulk["id"] not in {i["id"] for i in listing(svc, "/v1/jobs?state=succeeded", "writer")}
+    assert svc.get("/v1/jobs", who="writer2").json()["items"] == []
+
+    # the worker entered each new set into the catalogue: the newest (the bulk's last item) is served
+    newest = max(i["grasp_set"] for i in done["items"] if i["grasp_set"])
+    got = svc.get(f"/v1/catalogue/{obj}/{grip}")
+    assert got.status_code == 200 and got.headers["graspgen-set-id"] == str(newest)
+    fleet = svc.get(f"/v1/catalogue?gripper={grip}").json()
+    assert [(i["object"], i["id"]) for i in fleet["items"]] == [(obj, newest)]

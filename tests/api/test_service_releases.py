@@ -18,6 +18,12 @@ from services.common.models import GraspSet, Gripper, GripperVersion, ObjectMode
 pytestmark = pytest.mark.integration
 
 
+@pytest.fixture(params=["pg_service", "sqlite_service"])
+def svc(request):  # type: ignore[no-untyped-def]
+    """PostgreSQL + Redis, and the embedded default (SQLite, in-process worker)."""
+    return request.getfixturevalue(request.param)
+
+
 def add_set(svc, obj: str, grip: str, *, ov: int | None = None, gv: int | None = None) -> int:
     """A grasp set stored as the worker stores one (rows, export blob, catalogue refresh), for the given object and
     gripper versions (default: the newest)."""
@@ -79,8 +85,7 @@ def served(svc, obj: str, grip: str) -> tuple[int, int | None, str | None, str |
     return r.status_code, sid, h.get("graspgen-released"), h.get("graspgen-stale")
 
 
-def test_release_pins_a_set_until_withdrawn_and_history_records_who_and_when(pg_service):
-    svc = pg_service
+def test_release_pins_a_set_until_withdrawn_and_history_records_who_and_when(svc):
     obj, grip = pair(svc)
     a = add_set(svc, obj, grip)
     b = add_set(svc, obj, grip)
@@ -136,8 +141,7 @@ def test_release_pins_a_set_until_withdrawn_and_history_records_who_and_when(pg_
     assert rest["next_cursor"] is None
 
 
-def test_without_a_release_only_a_set_for_the_newest_object_and_gripper_versions_is_served(pg_service):
-    svc = pg_service
+def test_without_a_release_only_a_set_for_the_newest_object_and_gripper_versions_is_served(svc):
     obj, grip = pair(svc)
     old = add_set(svc, obj, grip)
     assert served(svc, obj, grip)[:2] == (200, old)
@@ -160,8 +164,7 @@ def test_without_a_release_only_a_set_for_the_newest_object_and_gripper_versions
     assert served(svc, obj, grip) == (200, new, "true", "false")
 
 
-def test_release_and_withdraw_need_write_scope_and_an_existing_set(pg_service):
-    svc = pg_service
+def test_release_and_withdraw_need_write_scope_and_an_existing_set(svc):
     obj, grip = pair(svc)
     gs = add_set(svc, obj, grip)
     for action in ("release", "withdraw"):
@@ -193,8 +196,7 @@ def sync(svc, grip: str, since: int | None = None, limit: int = 100) -> tuple[li
     raise AssertionError("pagination did not end")
 
 
-def test_fleet_sync_by_change_number_reports_releases_withdrawals_and_dropped_pairs(pg_service):
-    svc = pg_service
+def test_fleet_sync_by_change_number_reports_releases_withdrawals_and_dropped_pairs(svc):
     grip = slug("fleet")
     names = sorted(slug("f") for _ in range(4))
     ids = {}
