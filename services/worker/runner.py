@@ -140,9 +140,13 @@ class JobRunner:
             if is_unavailable(exc):
                 raise  # the database, not the job, failed (after retries): the task retries and the job runs again
             if isinstance(exc, GraspgenError):
-                err = jobs.problem(
-                    exc.code, "Invalid input", exc.message, **({"field": exc.field} if exc.field else {})
-                )
+                from graspgen.memory import MemoryLimitError
+                from services.common.memory_guard import problem_extra
+
+                fields = {"field": exc.field} if exc.field else {}
+                if isinstance(exc, MemoryLimitError):
+                    fields.update(problem_extra(exc))  # the largest point count that fits, the estimate, the budget
+                err = jobs.problem(exc.code, "Invalid input", exc.message, **fields)
                 return self._end(jid, "failed", err)
             log.exception("job %s failed after %.1f s", jid, time.monotonic() - started)
             return self._end(
@@ -270,8 +274,9 @@ class JobRunner:
             part = tmp / f"part.{inp.object_format}"  # the format is a whitelisted token, never a user path
             if inp.kind == "generate":
                 self.storage.download(inp.object_file_key, part)
+                loaded = self._check_memory(inp, part)  # MemoryLimitError: the job fails, never redelivered
                 gs = graspgen.generate(
-                    str(part),
+                    loaded,
                     inp.spec,
                     units=inp.units,
                     points=p["points"],
@@ -324,6 +329,24 @@ class JobRunner:
             rec.flush()
             rec.disconnect()  # finalises the .rrd (footer) now rather than at garbage collection
         return export_bytes, gs.stats, gs.grasps, candidates, rrd
+
+    def _check_memory(self, inp: _Inputs, path: Path):  # type: ignore[no-untyped-def]
+        """The part, loaded once, after the job's estimated peak memory was checked against this worker's budget."""
+        from graspgen.parts import load_part
+        from services.common.memory_guard import check_generate
+
+        part = load_part(
+            str(path), units=inp.units, name=inp.object_name, max_decoded_bytes=self.settings.max_decoded_bytes
+        )
+        check_generate(
+            budget_bytes=self.settings.job_memory_budget,
+            part_sha256=inp.object_sha256,
+            units=inp.units,
+            spec=inp.spec,
+            params=inp.params,
+            load_part=lambda: part,
+        )
+        return part
 
     def _metadata_markdown(self, inp: _Inputs) -> str:
         meta = {

@@ -6,6 +6,7 @@ failed request leaves the database as it was.
 
 from __future__ import annotations
 
+import logging
 import uuid
 from datetime import datetime
 from typing import Any
@@ -28,6 +29,8 @@ from services.common.models import (
     ObjectVersion,
     utcnow,
 )
+from services.common.settings import Settings
+from services.common.storage import Storage, StorageError
 from services.common.tokens import Principal
 from services.worker.dispatch import Dispatcher, DispatchError
 
@@ -45,6 +48,8 @@ __all__ = [
     "CLUSTER_PARAMS",
     "QUALITY_PARAMS",
 ]
+
+log = logging.getLogger(__name__)
 
 CLUSTER_PARAMS = ("k1", "k2", "seed")
 #: job params beyond graspgen.Params (docs/QUALITY.md): keyword arguments of graspgen.generate / recluster
@@ -185,15 +190,25 @@ def _dispatch_or_undo(session: Session, dispatcher: Dispatcher, job_id: uuid.UUI
 
 
 def submit_job(
-    session: Session, dispatcher: Dispatcher, principal: Principal, body: JobRequest, idempotency_key: str | None
+    session: Session,
+    dispatcher: Dispatcher,
+    principal: Principal,
+    body: JobRequest,
+    idempotency_key: str | None,
+    *,
+    memory: tuple[Settings, Storage] | None = None,
 ) -> tuple[Job, bool]:
-    """Returns (job, replayed): replayed is true when an Idempotency-Key matched an earlier identical request."""
+    """Returns (job, replayed): replayed is true when an Idempotency-Key matched an earlier identical request.
+
+    `memory`: check a generate job's estimated peak memory against the job memory budget (422 `memory-limit`)."""
     request = body.model_dump(exclude_none=True)
     request_sha = J.sha256_json(request)
     replayed = _replay(session, principal, idempotency_key, request_sha)
     if replayed is not None:
         return replayed, True
     resolved = _resolve_cluster(session, body) if body.kind == "cluster" else _resolve_generate(session, request)
+    if memory is not None and body.kind != "cluster":
+        _check_memory(session, *memory, resolved)
     job = Job(
         id=uuid.uuid4(),
         kind=body.kind,
@@ -216,6 +231,35 @@ def submit_job(
         return again, True
     _dispatch_or_undo(session, dispatcher, job.id, [str(job.id)])
     return job, False
+
+
+def _check_memory(session: Session, settings: Settings, storage: Storage, resolved: dict[str, Any]) -> None:
+    from graspgen.memory import MemoryLimitError
+    from graspgen.parts import load_part
+    from services.common.memory_guard import check_generate, problem_extra
+
+    ov = session.get(ObjectVersion, resolved["object_version_id"])
+    gv = session.get(GripperVersion, resolved["gripper_version_id"])
+    assert ov is not None and gv is not None
+    units, fmt, key, sha, spec = ov.units, ov.format, ov.file_key, ov.sha256, dict(gv.spec)
+    session.rollback()  # no transaction (a SQLite write lock) held while a probe runs
+    try:
+        check_generate(
+            budget_bytes=settings.job_memory_budget,
+            part_sha256=sha,
+            units=units,
+            spec=spec,
+            params=resolved["params"],
+            load_part=lambda: load_part(
+                storage.get_bytes(key), units=units, file_type=fmt, max_decoded_bytes=settings.max_decoded_bytes
+            ),  # only when no probe of this part, gripper and parameters is cached
+        )
+    except (OSError, StorageError) as exc:
+        # the part's file is unreadable here: the worker, which must read it to run the job, checks the memory
+        log.warning("memory check skipped at submission: object blob %s unreadable (%s)", key, type(exc).__name__)
+    except MemoryLimitError as exc:
+        extra = problem_extra(exc)
+        raise ApiError(422, exc.code, exc.message, title="Job too large for the worker's memory", **extra) from exc
 
 
 def submit_bulk(

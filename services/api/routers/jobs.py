@@ -8,7 +8,7 @@ from fastapi import APIRouter, Header, Path, Query, Response
 from services.common.models import JOB_KINDS, JOB_STATES, TERMINAL_STATES
 
 from ..crud import jobs as crud
-from ..deps import DispatcherDep, ReadDep, ReadSessionDep, SessionDep, SettingsDep, WriteDep
+from ..deps import DispatcherDep, ReadDep, ReadSessionDep, SessionDep, SettingsDep, StorageDep, WriteDep
 from ..schemas import BulkRequest, JobOut, JobPage, JobRequest
 from . import problems
 
@@ -52,9 +52,11 @@ def submit_job(
     principal: WriteDep,
     session: SessionDep,
     dispatcher: DispatcherDep,
+    settings: SettingsDep,
+    storage: StorageDep,
     idempotency_key: IdempotencyKey = None,
 ) -> dict:
-    job, replayed = crud.submit_job(session, dispatcher, principal, body, idempotency_key)
+    job, replayed = crud.submit_job(session, dispatcher, principal, body, idempotency_key, memory=(settings, storage))
     return _accepted(response, crud.job_out(session, job), replayed)
 
 

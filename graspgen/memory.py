@@ -1,0 +1,198 @@
+"""A job's peak memory, estimated before it runs (issue 16.4), and the largest point count that fits a budget.
+
+Memory is dominated by the candidates: pairs passing criteria (a)-(d) are kept (contacts, normals, free rolls,
+quality terms; clustering, coverage and the NPZ export work on all of them), and their number grows with the square
+of the points, since the points within one stroke of each other are what pairs are made of. Pairs passing (a)-(c)
+are collision-checked in blocks of at most 4 M (pipeline._PAIR_BLOCK), a bounded term; sampling is linear in the
+points (weighted sample elimination keeps several candidates per point). The three phases follow each other, so
+the estimate is the process's base plus the largest of them.
+
+`probe()` runs the real pipeline once at `PROBE_POINTS` evenly spaced points (about 0.3 s warm) and keeps the
+candidates and (a)-(c) pairs per point squared; `Probe.estimate(n)` scales them to n points and applies the byte
+costs below, which were fitted to measured peaks (bench/bench_memory.py, docs/benchmarks.md) and err on the high
+side: at fewer points the fingers slip between samples more often, so the probe over-counts candidates by about
+10 %. Everything here is a pure function of the part, the gripper and the parameters (the probe's seed is fixed),
+so the count `max_points()` names is one that `estimate()` accepts.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from .errors import InvalidParameterError
+from .gripper import GripperSpec
+from .parts import Part
+
+__all__ = [
+    "Probe",
+    "MemoryEstimate",
+    "MemoryLimitError",
+    "probe",
+    "estimate_peak_bytes",
+    "check_memory",
+    "PROBE_POINTS",
+]
+
+#: points of the probe run
+PROBE_POINTS = 2000
+#: a process running one job before it holds any of the job's arrays: interpreter, numpy/scipy, numba's compiled
+#: kernels and LLVM, trimesh (measured 250-290 MB)
+BASE_BYTES = 300 * 2**20
+#: sampling, per point: weighted sample elimination's candidate points and neighbour lists (1.6 KB measured at
+#: 100 k and 1 M points); freed before the pairs are made
+BYTES_PER_SAMPLED_POINT = 1_700
+#: the candidate phase (quality terms, clustering, coverage, export), per kept candidate at 16 rolls (344-374 B
+#: measured from 30 k to 100 k points) and per roll beyond (the free-roll masks), plus the points' own arrays
+BYTES_PER_CANDIDATE = 332
+BYTES_PER_CANDIDATE_ROLL = 3
+BYTES_PER_POINT = 100
+#: the collision phase: per (a)-(c) pair in flight, at most `_BLOCK_PAIRS` of them (<= 52 B measured), plus the
+#: candidates kept so far (index pairs, roll masks)
+BYTES_PER_PAIR = 60
+BYTES_PER_KEPT_PAIR = 40
+_BLOCK_PAIRS = 4_000_000
+#: the smallest and largest point counts Params accepts
+_MIN_POINTS, _MAX_POINTS = 100, 1_000_000
+
+
+class MemoryLimitError(InvalidParameterError):
+    """The job would need more memory than its budget; `max_points` is the largest point count that fits (0: none)."""
+
+    code = "memory-limit"
+
+    def __init__(self, message: str, *, max_points: int, estimate: MemoryEstimate, budget_bytes: int) -> None:
+        super().__init__(message, field="points")
+        self.max_points = max_points
+        self.estimate = estimate
+        self.budget_bytes = budget_bytes
+
+
+@dataclass(frozen=True)
+class MemoryEstimate:
+    points: int
+    peak_bytes: int  #: estimated peak resident memory of a process running the job
+    candidates: int  #: expected collision-free candidates
+    pairs: int  #: expected pairs passing (a)-(c)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "points": self.points,
+            "peak_bytes": self.peak_bytes,
+            "candidates": self.candidates,
+            "pairs": self.pairs,
+        }
+
+
+@dataclass(frozen=True)
+class Probe:
+    """What one probe run found, per point squared; `estimate()` scales it to any point count."""
+
+    probe_points: int
+    candidates_per_n2: float
+    pairs_per_n2: float
+    rolls: int
+
+    def estimate(self, points: int) -> MemoryEstimate:
+        n = int(points)
+        candidates = math.ceil(self.candidates_per_n2 * n * n)
+        pairs = math.ceil(self.pairs_per_n2 * n * n)
+        # the phases follow each other, each freeing the last one's arrays: the peak is the largest of them
+        sampling = BYTES_PER_SAMPLED_POINT * n
+        collision = BYTES_PER_PAIR * min(pairs, _BLOCK_PAIRS) + BYTES_PER_KEPT_PAIR * candidates
+        kept = (BYTES_PER_CANDIDATE + BYTES_PER_CANDIDATE_ROLL * self.rolls) * candidates + BYTES_PER_POINT * n
+        peak = BASE_BYTES + max(sampling, collision, kept)
+        return MemoryEstimate(n, int(peak), candidates, pairs)
+
+    def max_points(self, budget_bytes: int) -> int:
+        """The largest point count (a multiple of 100 from 100 to 1,000,000) whose estimate fits; 0 when none does."""
+        if self.estimate(_MIN_POINTS).peak_bytes > budget_bytes:
+            return 0
+        lo, hi = _MIN_POINTS // 100, _MAX_POINTS // 100  # in hundreds: the estimate grows with n
+        while lo < hi:
+            mid = (lo + hi + 1) // 2
+            if self.estimate(mid * 100).peak_bytes <= budget_bytes:
+                lo = mid
+            else:
+                hi = mid - 1
+        return lo * 100
+
+
+def probe(
+    part: Part,
+    gripper: GripperSpec | dict[str, Any],
+    *,
+    friction: float | None = None,
+    safety_factor: float = 1.5,
+    rolls: int = 16,
+    inside: bool = False,
+    collision: str = "swept",
+    **_: Any,
+) -> Probe:
+    """Run the pipeline at PROBE_POINTS points of `part` and keep its candidate and pair counts per point squared.
+
+    Other keyword arguments (points, k1, k2, seed, quality options) do not change the density and are ignored.
+    """
+    from .pipeline import generate
+
+    gs = generate(
+        part,
+        gripper,
+        points=PROBE_POINTS,
+        friction=friction,
+        safety_factor=safety_factor,
+        rolls=rolls,
+        inside=inside,
+        collision=collision,
+        k1=1,
+        k2=1,
+        seed=0,
+    )
+    s = gs.stats
+    m = max(int(s["points"]), 2)
+    rej = s["rejected"]
+    pairs = int(s["pairs_total"]) - int(rej["stroke"]) - int(rej["outside"]) - int(rej["friction"])
+    # a point cloud with fewer points than asked gives m < PROBE_POINTS; scaling from it stays an over-estimate
+    return Probe(m, int(s["candidates"]) / (m * m), pairs / (m * m), int(rolls))
+
+
+def estimate_peak_bytes(
+    part: Part, gripper: GripperSpec | dict[str, Any], *, points: int, **params: Any
+) -> MemoryEstimate:
+    """The estimated peak memory of `generate(part, gripper, points=points, **params)` (see the module docstring)."""
+    return probe(part, gripper, **params).estimate(points)
+
+
+def check_memory(
+    part: Part,
+    gripper: GripperSpec | dict[str, Any],
+    budget_bytes: int,
+    *,
+    points: int,
+    the_probe: Probe | None = None,
+    **params: Any,
+) -> MemoryEstimate:
+    """The estimate, or `MemoryLimitError` naming the largest point count that fits when it exceeds `budget_bytes`."""
+    pr = the_probe if the_probe is not None else probe(part, gripper, **params)
+    est = pr.estimate(points)
+    if est.peak_bytes <= budget_bytes:
+        return est
+    raise limit_error(pr, est, budget_bytes)
+
+
+def limit_error(pr: Probe, est: MemoryEstimate, budget_bytes: int) -> MemoryLimitError:
+    fit = pr.max_points(budget_bytes)
+    gib = 2**30
+    advice = (
+        f"at most {fit:,} points fit: use points <= {fit}"
+        if fit
+        else "not even 100 points fit: raise the worker's memory budget"
+    )
+    return MemoryLimitError(
+        f"{est.points:,} points would need about {est.peak_bytes / gib:.1f} GiB at the peak (about "
+        f"{est.candidates:,} candidates), more than this worker's budget of {budget_bytes / gib:.1f} GiB; {advice}",
+        max_points=fit,
+        estimate=est,
+        budget_bytes=budget_bytes,
+    )

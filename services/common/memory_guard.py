@@ -1,0 +1,69 @@
+"""The memory guard of generate jobs (issue 16.4): graspgen.memory's estimate against the job memory budget.
+
+Checked twice: at submission (`POST /v1/jobs`: a 422 `memory-limit` problem naming the largest point count that
+fits, no job row) and by the worker before it runs a job (the job fails with the same problem, is acknowledged and
+never redelivered), because the worker's budget is the one that matters and a job may have been queued before it
+changed. A probe (one pipeline run at graspgen.memory.PROBE_POINTS points, ~0.3 s) is kept per part, gripper and
+the parameters that change the candidate density, in a small per-process LRU, so resubmissions cost nothing.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+from collections import OrderedDict
+from collections.abc import Callable
+from typing import Any
+
+from graspgen.memory import MemoryEstimate, MemoryLimitError, Probe, limit_error, probe
+
+__all__ = ["check_generate", "DENSITY_PARAMS", "problem_extra"]
+
+#: job params that change the candidates per point squared (points, k1, k2, seed, quality options do not)
+DENSITY_PARAMS = ("friction", "safety_factor", "rolls", "inside", "collision")
+_MAX_PROBES = 256
+_probes: OrderedDict[str, Probe] = OrderedDict()
+_lock = threading.Lock()
+
+
+def _key(part_sha256: str, units: str, spec: dict[str, Any], params: dict[str, Any]) -> str:
+    dens = {k: params.get(k) for k in DENSITY_PARAMS}
+    return json.dumps([part_sha256, units, spec, dens], sort_keys=True, default=str)
+
+
+def check_generate(
+    *,
+    budget_bytes: int,
+    part_sha256: str,
+    units: str,
+    spec: dict[str, Any],
+    params: dict[str, Any],
+    load_part: Callable[[], Any],
+) -> MemoryEstimate:
+    """The estimate of a generate job with these (effective) params, or `MemoryLimitError` when it exceeds the
+    budget. `load_part()` returns the graspgen Part; it is called only when no probe of this part is cached."""
+    key = _key(part_sha256, units, spec, params)
+    with _lock:
+        pr = _probes.get(key)
+        if pr is not None:
+            _probes.move_to_end(key)
+    if pr is None:
+        pr = probe(load_part(), spec, **{k: params[k] for k in DENSITY_PARAMS if k in params})
+        with _lock:
+            _probes[key] = pr
+            while len(_probes) > _MAX_PROBES:
+                _probes.popitem(last=False)
+    est = pr.estimate(int(params["points"]))
+    if est.peak_bytes > budget_bytes:
+        raise limit_error(pr, est, budget_bytes)
+    return est
+
+
+def problem_extra(exc: MemoryLimitError) -> dict[str, Any]:
+    """The fields a memory-limit problem carries beside `detail` (API response and the failed job's `error`)."""
+    return {
+        "field": "points",
+        "max_points": exc.max_points,
+        "estimated_peak_bytes": exc.estimate.peak_bytes,
+        "budget_bytes": exc.budget_bytes,
+    }

@@ -1,0 +1,111 @@
+"""Memory guard (issue 16.4) in the service: PostgreSQL, Redis, the real core.
+
+A job whose estimated peak exceeds the budget (GRASPGEN_WORKER_MEMORY_BYTES) is refused at submission with a 422
+`memory-limit` problem naming the largest point count that fits, and no row; a job at that count is accepted and
+runs. A job accepted under a larger budget is failed by a worker with a smaller one before it runs: `failed` with
+the same problem, one attempt, and a redelivery does not run it again.
+"""
+
+from __future__ import annotations
+
+import pytest
+from fastapi.testclient import TestClient
+from services_conftest import (
+    GRIPPER,
+    PG_URL,
+    Service,
+    box_stl,
+    broker_settings,
+    redis_cleanup,
+    slug,
+    write_tokens_file,
+)
+
+from graspgen import memory
+from graspgen.parts import load_part
+from services.api.app import create_app
+from services.common.settings import Settings
+from services.worker.runner import JobRunner
+
+pytestmark = [pytest.mark.integration, pytest.mark.slow]  # runs the core
+
+
+@pytest.fixture
+def make_service(pg_schema, tmp_path):
+    made = []
+    tokens = write_tokens_file(tmp_path / "tokens.json")
+    broker = broker_settings()
+
+    def make(budget: int) -> Service:
+        settings = Settings(
+            database_url=PG_URL,
+            database_schema=pg_schema,
+            storage_dir=tmp_path / "var",
+            tokens_file=tmp_path / "tokens.json",
+            worker_memory_bytes=budget,
+            **broker,
+        )
+        client = TestClient(create_app(settings))
+        client.__enter__()
+        made.append(client)
+        return Service(client, settings, tokens)
+
+    yield make
+    for c in made:
+        c.__exit__(None, None, None)
+    redis_cleanup(broker["broker_key_prefix"])
+
+
+@pytest.fixture(scope="module")
+def box_probe():
+    return memory.probe(load_part(box_stl(), units="mm", file_type="stl"), GRIPPER)
+
+
+def _pair(svc: Service) -> tuple[str, str]:
+    obj, grip = slug("mem"), slug("grip")
+    assert svc.upload(obj).status_code == 201
+    assert svc.gripper(grip).status_code == 201
+    return obj, grip
+
+
+def test_submission_refuses_a_job_above_the_budget_and_names_a_count_that_fits(make_service, box_probe):
+    budget = box_probe.estimate(3000).peak_bytes
+    fit = box_probe.max_points(budget)
+    assert 3000 <= fit < 3100
+    svc = make_service(budget)
+    obj, grip = _pair(svc)
+    before = svc.row_counts()
+    r = svc.post("/v1/jobs", json={"object": obj, "gripper": grip, "params": {"points": 20_000}})
+    assert r.status_code == 422 and r.headers["content-type"].startswith("application/problem+json")
+    body = r.json()
+    assert body["code"] == "memory-limit" and body["field"] == "points" and body["max_points"] == fit
+    assert body["budget_bytes"] == budget and body["estimated_peak_bytes"] > budget
+    assert f"at most {fit:,} points fit" in body["detail"] and "20,000 points" in body["detail"]
+    assert svc.row_counts() == before  # no job row
+    # the count it names is accepted and runs
+    ok = svc.post("/v1/jobs", json={"object": obj, "gripper": grip, "params": {"points": fit, "k1": 4, "k2": 2}})
+    assert ok.status_code == 202, ok.text
+    state = svc.app.state
+    assert JobRunner(state.db, state.storage, svc.settings).run(ok.json()["id"]) == "succeeded"
+    assert svc.get(f"/v1/jobs/{ok.json()['id']}").json()["state"] == "succeeded"
+
+
+def test_the_worker_fails_a_queued_job_above_its_budget_once(make_service, box_probe):
+    svc = make_service(64 * 2**30)  # the API's budget admits it
+    obj, grip = _pair(svc)
+    r = svc.post("/v1/jobs", json={"object": obj, "gripper": grip, "params": {"points": 20_000}})
+    assert r.status_code == 202, r.text
+    jid = r.json()["id"]
+    small = svc.settings.model_copy(update={"worker_memory_bytes": box_probe.estimate(3000).peak_bytes})
+    state = svc.app.state
+    runner = JobRunner(state.db, state.storage, small)
+    assert runner.run(jid) == "failed"
+    job = svc.get(f"/v1/jobs/{jid}").json()
+    assert job["state"] == "failed" and job["attempts"] == 1 and job["grasp_set"] is None
+    err = job["error"]
+    assert err["code"] == "memory-limit" and err["field"] == "points"
+    assert err["max_points"] == box_probe.max_points(small.worker_memory_bytes)
+    assert f"at most {err['max_points']:,} points fit" in err["detail"]
+    # a redelivered message finds the job finished: not run again, still one attempt
+    assert runner.run(jid) == "failed"
+    assert svc.get(f"/v1/jobs/{jid}").json()["attempts"] == 1
