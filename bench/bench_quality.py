@@ -54,6 +54,8 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "meshes"
 METHODS = ("two-stage", "two-stage+quality", "random", "top-friction", "single-stage")
 SINGLE_STAGE_SAMPLE = 2500
+#: N per finger, the demo gripper's force in these tables (physics.py has no default)
+GRIP_FORCE = 20.0
 #: published YCB masses, kg
 YCB_MASS = {"ycb_mustard_bottle": 0.603, "ycb_sugar_box": 0.514, "ycb_tomato_soup_can": 0.349}
 
@@ -125,7 +127,7 @@ def run_part(name, part, args, spec) -> dict:
     if not args.no_sim and part.mesh is not None:
         t0 = time.perf_counter()
         row["density"] = density_of(name, part)
-        sim_part = physics.prepare_part(part.mesh, spec, density=row["density"], seed=0)
+        sim_part = physics.prepare_part(part.mesh, spec, density=row["density"], grip_force=GRIP_FORCE, seed=0)
         row["decomposition_s"] = time.perf_counter() - t0
         row["geometry"] = f"{sim_part.geometry} ({sim_part.pieces})"
     for method, idx in sel.items():
@@ -154,7 +156,7 @@ def time_sims(spec) -> list[dict]:
         gs = graspgen.generate(part, DEMO_GRIPPER, points=3000, k1=16, k2=4)
         c = gs.candidates
         idx = c.medoids[:64]
-        sim_part = physics.prepare_part(part.mesh, spec, seed=0)
+        sim_part = physics.prepare_part(part.mesh, spec, density=density_of(name, part), grip_force=GRIP_FORCE, seed=0)
         poses, widths = poses_of(c, idx), c.widths[idx]
         physics.simulate_grasps(sim_part, poses[:2], widths[:2], workers=1)  # warm
         row = {"part": name, "grasps": len(idx), "geometry": f"{sim_part.geometry} ({sim_part.pieces})"}
@@ -272,7 +274,11 @@ def main() -> None:
         print(f"{name}: {row['candidates']} candidates, {time.perf_counter() - t0:.1f} s {summary}", flush=True)
     timing = [] if args.no_sim else time_sims(spec)
     text = markdown(rows, timing, args)
-    Path(args.out).write_text(text)
+    out = Path(args.out)
+    old = out.read_text() if out.is_file() else ""
+    if "<!-- bench_hold:start -->" in old:  # keep bench_hold.py's section
+        text = text.rstrip("\n") + "\n\n" + "<!-- bench_hold:start -->" + old.split("<!-- bench_hold:start -->", 1)[1]
+    out.write_text(text)
     print(text)
 
 

@@ -1,0 +1,431 @@
+"""Benchmark of criterion (e) `hold` and of the perturbed physics validation (issue 14): does an exported grasp hold?
+
+    .venv/bin/python bench/bench_hold.py [--points 5000] [--k1 8] [--k2 2] [--mass 0.2] [--grip-force 20]
+                                         [--sample 200] [--workers 2] [--parts NAME ...]
+                                         [--configs paper hold validate] [--out docs/benchmarks_quality.md]
+
+Parts: every mesh in ../shared/meshes (*.stl, *.obj; units from its units.json; bad/ left out) and
+../shared/meshes/paper (units from its units.json); a missing folder is skipped with a message. Gripper: the PGN-80 of
+examples/pgn-80.json (80 mm stroke) with `grip_force` 20 N per finger; a part whose oriented bounding box is wider
+than 70 mm in every direction (the 80 mm stroke minus a 10 mm opening margin) gets the same gripper with a 140 mm
+stroke (`pgn-80-wide`), and the table says so. Every part weighs `--mass` (0.2 kg).
+
+Three configurations of graspgen.generate at `--points`, k = k1 x k2, seed 0:
+
+- `paper`: the paper's criteria (a)-(d) only (hold="off");
+- `hold`: with criterion (e) (hold="any", mass_kg);
+- `validate`: with (e) and the MuJoCo validation with cluster-aware repair (validate=True).
+
+Every exported grasp is then simulated (physics.py, the same mass and grip force) nominally and under each member of
+`physics.perturbation_set(0)` (mass x0.5 / x1.5, friction 0.4 / 0.6, gravity turned to -Z, +-X, +-Y of the grasp
+frame after the pick, a lateral shake of 1 g, one seeded mixture). Reported: nominal success, success under every
+member ("all"), the mean share of members held, failures per member, coverage (stats.coverage at 1 cm / 30 deg) and
+generate's wall time. A confusion table compares (e)'s verdict (hold margin >= 1) with the nominal simulation on
+`--sample` random candidates per part of the paper configuration (seeded).
+
+The markdown goes between the `bench_hold` markers of `--out` (appended when absent); no assertions.
+"""
+
+from __future__ import annotations
+
+import argparse
+import inspect
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import graspgen  # noqa: E402
+from graspgen import physics  # noqa: E402
+from graspgen.gripper import GripperSpec  # noqa: E402
+from graspgen.parts import load_part  # noqa: E402
+from graspgen.pipeline import _poses  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED = ROOT.parent / "shared" / "meshes"
+FOLDERS = (SHARED, SHARED / "paper")
+START, END = "<!-- bench_hold:start -->", "<!-- bench_hold:end -->"
+WIDE_STROKE = 0.14
+#: a part wider than this in every direction does not fit the 80 mm stroke with a useful opening margin
+WIDE_ABOVE = 0.07
+CONFIGS = ("paper", "hold", "validate")
+MEAN = "mean_fraction"
+
+
+def gripper_for(mesh: trimesh.Trimesh, grip_force: float) -> dict:
+    g = json.loads((ROOT / "examples" / "pgn-80.json").read_text())
+    g["grip_force"] = grip_force
+    if min(mesh.bounding_box_oriented.primitive.extents) > WIDE_ABOVE:
+        g["name"], g["stroke"] = "pgn-80-wide", WIDE_STROKE
+    return g
+
+
+def parts(names: list[str] | None):
+    for folder in FOLDERS:
+        units_file = folder / "units.json"
+        if not units_file.is_file():
+            print(f"skipped: {folder} (missing, or no units.json)", flush=True)
+            continue
+        units = json.loads(units_file.read_text())
+        for file in sorted(units):
+            path = folder / file
+            if "/" in file or path.suffix.lower() not in (".stl", ".obj") or not path.is_file():
+                continue
+            name = path.stem
+            if not names or name in names:
+                yield f"{folder.name}/{name}", load_part(path, units=units[file], name=name)
+
+
+def _supports(name: str) -> bool:
+    return name in inspect.signature(graspgen.generate).parameters
+
+
+def config_kwargs(config: str, mass: float) -> dict | None:
+    """generate()'s keywords for a configuration; None when this checkout's generate cannot run it."""
+    if config == "paper":
+        return {"hold": "off"} if _supports("hold") else {}
+    if not (_supports("hold") and _supports("mass_kg")):
+        return None
+    kw = {"hold": "any", "mass_kg": mass}
+    if config == "validate":
+        kw["validate"] = True
+    return kw
+
+
+def hold_margins_of(part, gs, idx: np.ndarray, spec: GripperSpec, args) -> np.ndarray | None:
+    """(e)'s hold margin of candidates `idx`: the candidate set's own when it has them, else computed with
+    graspgen.hold the way criterion (e) does (None when this checkout has no graspgen.hold)."""
+    c = gs.candidates
+    own = getattr(c, "hold_margin", None)
+    if own is not None and np.all(np.isfinite(np.asarray(own)[idx])):
+        return np.asarray(own, dtype=np.float64)[idx]
+    try:
+        from graspgen import hold, quality, sampling
+    except ImportError:
+        return None
+    sample = sampling.sample_surface(part, args.points, seed=0)
+    pad_radius = min(spec.finger_width, spec.finger_depth) / 2
+    rho = hold.torsion_radii(sample.points, sample.normals, pad_radius)
+    from scipy.spatial import cKDTree
+
+    contacts = c.contacts[idx]
+    _, nearest = cKDTree(sample.points).query(contacts.reshape(-1, 3))
+    radii = rho[nearest].reshape(-1, 2)
+    com = quality.center_of_mass(part.mesh, part.points)
+    return hold.hold_margins(
+        contacts,
+        radii,
+        com,
+        load=hold.hold_load(args.mass, 9.81),
+        grip_force=args.grip_force,
+        friction=spec.friction,
+    )
+
+
+def run_part(label: str, part, args, members) -> dict:
+    gripper = gripper_for(part.mesh, args.grip_force)
+    spec = GripperSpec.from_dict(gripper)
+    row = {"part": label, "gripper": gripper["name"], "configs": {}}
+    t0 = time.perf_counter()
+    sim = physics.prepare_part(part.mesh, spec, mass_kg=args.mass, seed=0)
+    row["prepare_s"] = time.perf_counter() - t0
+    row["geometry"] = f"{sim.geometry} ({sim.pieces})"
+    paper_gs = None
+    for config in args.configs:
+        kw = config_kwargs(config, args.mass)
+        if kw is None:
+            print(f"  {label} {config}: generate() has no hold/mass_kg in this checkout, skipped", flush=True)
+            continue
+        t0 = time.perf_counter()
+        gs = graspgen.generate(part, gripper, points=args.points, k1=args.k1, k2=args.k2, seed=0, **kw)
+        t_gen = time.perf_counter() - t0
+        if config == "paper":
+            paper_gs = gs
+        c = gs.candidates
+        idx = np.array([g["candidate"] for g in gs.grasps], dtype=np.int64)
+        out = {
+            "candidates": len(c),
+            "exported": len(idx),
+            "generate_s": t_gen,
+            "coverage": next(
+                (lv["share"] for lv in gs.stats.get("coverage", {}).get("levels", []) if lv["radius"] == 0.01), None
+            ),
+        }
+        if "validation" in gs.stats:
+            v = gs.stats["validation"]
+            out["validation"] = {k: v.get(k) for k in ("tested", "succeeded", "repaired", "simulated")}
+        if len(idx):
+            t0 = time.perf_counter()
+            grid = physics.simulate_perturbed(
+                sim,
+                _poses(c, idx),
+                c.widths[idx],
+                [physics.NOMINAL, *members],
+                seed=0,
+                keys=idx,
+                workers=args.workers,
+                inside=c.inside[idx],
+            )
+            out["sim_s"] = time.perf_counter() - t0
+            ok = np.array([[r.success for r in g] for g in grid], dtype=bool)  # (k, 1 + members)
+            out["nominal"] = int(ok[:, 0].sum())
+            out["all"] = int(ok.all(axis=1).sum())
+            out["mean_fraction"] = float(ok[:, 1:].mean())
+            out["member_fails"] = {p.name: int((~ok[:, j + 1]).sum()) for j, p in enumerate(members)}
+            out["nominal_reasons"] = {
+                reason: sum(g[0].reason == reason for g in grid) for reason in physics.REASONS if reason
+            }
+            margins = [g.get("hold_margin") for g in gs.grasps]
+            if any(m is not None for m in margins):
+                out["min_hold_margin"] = float(min(m for m in margins if m is not None))
+        row["configs"][config] = out
+        print(f"  {label} {config}: {json.dumps(out, default=str)}", flush=True)
+    if args.sample > 0 and paper_gs is None:  # the confusion table needs the paper configuration's candidates
+        paper_gs = graspgen.generate(
+            part, gripper, points=args.points, k1=args.k1, k2=args.k2, seed=0, **config_kwargs("paper", args.mass)
+        )
+    if args.sample > 0 and len(paper_gs.candidates):
+        c = paper_gs.candidates
+        n = len(c)
+        idx = np.sort(np.random.default_rng(0).choice(n, size=min(args.sample, n), replace=False))
+        margins = hold_margins_of(part, paper_gs, idx, spec, args)
+        if margins is not None:
+            m = min(args.sample_perturbed, len(idx))  # the first m of the sample also under every perturbation
+            rest = [physics.NOMINAL] + list(members)
+            grid = physics.simulate_perturbed(
+                sim,
+                _poses(c, idx),
+                c.widths[idx],
+                rest[:1],
+                seed=0,
+                keys=idx,
+                workers=args.workers,
+                inside=c.inside[idx],
+            )
+            if m:
+                pert = physics.simulate_perturbed(
+                    sim,
+                    _poses(c, idx[:m]),
+                    c.widths[idx[:m]],
+                    rest[1:],
+                    seed=0,
+                    keys=idx[:m],
+                    workers=args.workers,
+                    inside=c.inside[idx[:m]],
+                )
+                grid = [g + pert[i] if i < m else g for i, g in enumerate(grid)]
+            passed = margins >= 1.0
+            row["margins_sample"] = [round(float(x), 4) for x in margins]
+            for key, sel, cols in (
+                ("confusion", slice(None), slice(0, 1)),
+                ("confusion_perturbed", slice(0, m), slice(None)),
+            ):
+                g = grid[sel]
+                if not g:
+                    continue
+                held = np.array([all(r.success for r in row_[cols]) for row_ in g])
+                geometric = np.array([row_[0].reason in ("collision", "no_contact") for row_ in g])
+                ps = passed[sel]
+                row[key] = {
+                    "sampled": len(g),
+                    "tp": int(np.sum(ps & held)),
+                    "fp": int(np.sum(ps & ~held & ~geometric)),
+                    "fn": int(np.sum(~ps & held)),
+                    "tn": int(np.sum(~ps & ~held & ~geometric)),
+                    "geometric": int(np.sum(geometric)),
+                }
+                print(f"  {label} {key}: {row[key]}", flush=True)
+    return row
+
+
+def pct(a, b):
+    return "-" if not b else f"{100.0 * a / b:.1f} %"
+
+
+def markdown(rows, members, args, wall_s) -> str:
+    cmd = "PYTHONUNBUFFERED=1 .venv/bin/python bench/bench_hold.py" + (
+        f" --parts {' '.join(args.parts)}" if args.parts else ""
+    )
+    lines = [
+        START,
+        "## Criterion (e) and perturbed validation (issue 14)",
+        "",
+        f"Made by `{cmd}` ({wall_s / 60:.0f} min; see its docstring). {args.points} points, k = {args.k1} x "
+        f"{args.k2}, seed 0, every part {args.mass} kg, grip force {args.grip_force:g} N per finger, friction 0.5, "
+        "gripper pgn-80 (80 mm stroke; `pgn-80-wide`, 140 mm, where the part is wider than 70 mm in every "
+        "direction). Configurations: `paper` = criteria (a)-(d) (hold off); `hold` = with (e); `validate` = with "
+        "(e) and MuJoCo validation + repair. Every exported grasp is simulated nominally and under the "
+        f"{len(members)} members of `physics.perturbation_set(0)`: nominal = held in the nominal simulation; all = "
+        "held under every member; mean = mean share of members held; cov = stats.coverage at 1 cm / 30 deg. "
+        f"Machine: {platform.machine()}, {os.cpu_count()} cores shared with other jobs, {args.workers} simulation "
+        f"threads, mujoco {__import__('mujoco').__version__}.",
+        "",
+        "### Total",
+        "",
+        "| configuration | parts | grasps | nominal | all members | mean share | mean cov | generate time |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for config in args.configs:
+        vals = [r["configs"][config] for r in rows if config in r["configs"]]
+        if not vals:
+            continue
+        k = sum(v["exported"] for v in vals)
+        nom = sum(v.get("nominal", 0) for v in vals)
+        allm = sum(v.get("all", 0) for v in vals)
+        mean = sum(v.get("mean_fraction", 0.0) * v["exported"] for v in vals) / k if k else None
+        covs = [v["coverage"] for v in vals if v.get("coverage") is not None]
+        lines.append(
+            f"| {config} | {len(vals)} | {k} | {pct(nom, k)} | {pct(allm, k)} | "
+            f"{'-' if mean is None else f'{100 * mean:.1f} %'} | "
+            f"{f'{100 * np.mean(covs):.1f} %' if covs else '-'} | {sum(v['generate_s'] for v in vals):.0f} s |"
+        )
+    lines += [
+        "",
+        "### Per part",
+        "",
+        "| part | gripper | configuration | candidates | grasps | nominal | all members | mean share | cov | "
+        "generate | validation (held / tested, repaired) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        for config in args.configs:
+            v = r["configs"].get(config)
+            if v is None:
+                continue
+            val = v.get("validation")
+            vtxt = f"{val['succeeded']} / {val['tested']}, {val['repaired']}" if val else "-"
+            k = v["exported"]
+            cov = v.get("coverage")
+            lines.append(
+                f"| {r['part']} | {r['gripper']} | {config} | {v['candidates']:,} | {k} | "
+                f"{pct(v.get('nominal', 0), k)} | {pct(v.get('all', 0), k)} | "
+                f"{'-' if not k else f'{100 * v.get(MEAN, 0.0):.1f} %'} | "
+                f"{'-' if cov is None else f'{100 * cov:.1f} %'} | {v['generate_s']:.1f} s | {vtxt} |"
+            )
+    lines += [
+        "",
+        "### Failures per perturbation (exported grasps, all parts)",
+        "",
+        "| perturbation | " + " | ".join(c for c in args.configs if any(c in r["configs"] for r in rows)) + " |",
+        "|---|" + "---|" * sum(any(c in r["configs"] for r in rows) for c in args.configs),
+    ]
+    shown = [c for c in args.configs if any(c in r["configs"] for r in rows)]
+    for p in members:
+        cells = []
+        for config in shown:
+            vals = [r["configs"][config] for r in rows if config in r["configs"]]
+            fails = sum(v.get("member_fails", {}).get(p.name, 0) for v in vals)
+            worst = sorted(
+                ((v.get("member_fails", {}).get(p.name, 0), r["part"]) for r, v in zip(rows, vals, strict=False)),
+                reverse=True,
+            )
+            parts_txt = ", ".join(f"{name.split('/')[-1]} {n}" for n, name in worst[:3] if n)
+            cells.append(f"{fails}" + (f" ({parts_txt})" if parts_txt else ""))
+        lines.append(f"| {p.name} | " + " | ".join(cells) + " |")
+    for key, title, what in (
+        (
+            "confusion",
+            "the nominal simulation",
+            f"{args.sample} random candidates per part of the `paper` configuration (seeded); held = held in the "
+            "nominal simulation.",
+        ),
+        (
+            "confusion_perturbed",
+            "the perturbed simulations",
+            f"The first {args.sample_perturbed} of those candidates per part; held = held under the nominal "
+            "simulation and every member of the perturbation set.",
+        ),
+    ):
+        conf = [r for r in rows if key in r]
+        if not conf:
+            continue
+        tot = {k: sum(r[key][k] for r in conf) for k in ("sampled", "tp", "fp", "fn", "tn", "geometric")}
+        lines += [
+            "",
+            f"### How well (e) predicts {title}",
+            "",
+            what + " (e) passes: hold margin >= 1 (graspgen.hold.hold_margins with the same mass, grip force and "
+            "friction). Candidates the simulation rejects for geometric reasons (collision on the approach, no "
+            "contact: not (e)'s question) are counted apart.",
+            "",
+            "| part | sampled | (e) pass, held | (e) pass, not held | (e) fail, held | (e) fail, not held | "
+            "collision / no contact |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for r in conf + [{"part": "**total**", key: tot}]:
+            q = r[key]
+            lines.append(
+                f"| {r['part']} | {q['sampled']} | {q['tp']} | {q['fp']} | {q['fn']} | {q['tn']} | {q['geometric']} |"
+            )
+        lines += [
+            "",
+            f"Of the candidates (e) passes (and the simulation can grip), {pct(tot['tp'], tot['tp'] + tot['fp'])} "
+            f"are held; of those it rejects, {pct(tot['fn'], tot['fn'] + tot['tn'])} are held anyway.",
+        ]
+    geo = [f"{r['part'].split('/')[-1]} {r['geometry']} {r['prepare_s']:.0f} s" for r in rows]
+    lines += ["", "Collision geometry of the simulation and time to build it: " + "; ".join(geo) + ".", END]
+    return "\n".join(lines) + "\n"
+
+
+def write_block(path: Path, block: str) -> None:
+    text = path.read_text() if path.is_file() else ""
+    if START in text and END in text:
+        head, rest = text.split(START, 1)
+        tail = rest.split(END, 1)[1]
+        text = head + block.rstrip("\n") + tail
+    else:
+        text = text.rstrip("\n") + "\n\n" + block
+    path.write_text(text)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--points", type=int, default=5000)
+    ap.add_argument("--k1", type=int, default=8)
+    ap.add_argument("--k2", type=int, default=2)
+    ap.add_argument("--mass", type=float, default=0.2)
+    ap.add_argument("--grip-force", type=float, default=20.0)
+    ap.add_argument("--sample", type=int, default=200)
+    ap.add_argument("--sample-perturbed", type=int, default=30)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--merge", help="rows (--json) of an earlier run: its configurations are kept, this run's added")
+    ap.add_argument("--parts", nargs="*")
+    ap.add_argument("--configs", nargs="*", default=list(CONFIGS), choices=CONFIGS)
+    ap.add_argument("--out", default=str(ROOT / "docs" / "benchmarks_quality.md"))
+    ap.add_argument("--json", help="also write the raw rows here")
+    args = ap.parse_args()
+    members = physics.perturbation_set(0)
+    earlier = {r["part"]: r for r in json.loads(Path(args.merge).read_text())} if args.merge else {}
+    rows = []
+    t_all = time.perf_counter()
+    for label, part in parts(args.parts):
+        t0 = time.perf_counter()
+        row = run_part(label, part, args, members)
+        old = earlier.pop(label, None)
+        if old is not None:
+            row = {
+                **old,
+                **{k: v for k, v in row.items() if k != "configs"},
+                "configs": {**old["configs"], **row["configs"]},
+            }
+        rows.append(row)
+        print(f"{label}: {time.perf_counter() - t0:.0f} s", flush=True)
+        if args.json:
+            Path(args.json).write_text(json.dumps(rows, indent=1, default=str))
+    rows += list(earlier.values())
+    args.configs = [c for c in CONFIGS if any(c in r["configs"] for r in rows)]
+    block = markdown(rows, members, args, time.perf_counter() - t_all)
+    if args.out:
+        write_block(Path(args.out), block)
+    print(block)
+
+
+if __name__ == "__main__":
+    main()
