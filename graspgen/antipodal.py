@@ -393,6 +393,33 @@ def antipodal_pairs(
     )
 
 
+def within_spread(
+    points: np.ndarray,
+    normals: np.ndarray,
+    i: np.ndarray,
+    j: np.ndarray,
+    inside: np.ndarray,
+    spread_rad: np.ndarray,
+    half_angle_rad: float,
+) -> np.ndarray:
+    """Criterion (c) with a position tolerance: (m,) bool, true where both contacts stay inside the cone for every
+    surface normal near them, i.e. contact angle + the point's normal spread (rad, per point) <= the half-angle.
+
+    Only pairs with a contact whose spread is not zero are evaluated; the rest passed (c) already."""
+    ok = np.ones(len(i), dtype=bool)
+    near = (spread_rad[i] > 0) | (spread_rad[j] > 0)
+    if not near.any():
+        return ok
+    a, b, ins = i[near], j[near], inside[near]
+    d = points[b] - points[a]
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    sign = np.where(ins, 1.0, -1.0)
+    ang0 = np.arccos(np.clip(sign * np.sum(normals[a] * d, axis=1), -1.0, 1.0)) + spread_rad[a]
+    ang1 = np.arccos(np.clip(-sign * np.sum(normals[b] * d, axis=1), -1.0, 1.0)) + spread_rad[b]
+    ok[near] = np.maximum(ang0, ang1) <= half_angle_rad
+    return ok
+
+
 def friction_margin_deg(
     points: np.ndarray, normals: np.ndarray, i: np.ndarray, j: np.ndarray, inside: np.ndarray, half_angle_rad: float
 ) -> np.ndarray:

@@ -36,6 +36,8 @@ class Candidates:
     #: optional, present when quality was scored (quality.py): (n, 3) terms and the part's centre of mass (3,)
     quality_terms: np.ndarray | None = None
     center_of_mass: np.ndarray | None = None
+    #: optional, present when criterion (e) ran (hold.py): (n,) the load each candidate resists over the load required
+    hold_margin: np.ndarray | None = None
 
     # derived once per instance (clustering, coverage, quality and the export each read them; the arrays are
     # large): cached_property writes the instance __dict__ directly, which a frozen dataclass allows
@@ -58,7 +60,7 @@ class Candidates:
     def arrays(self) -> dict[str, np.ndarray]:
         extra = {
             k: getattr(self, k).astype(np.float64)
-            for k in ("quality_terms", "center_of_mass")
+            for k in ("quality_terms", "center_of_mass", "hold_margin")
             if getattr(self, k) is not None
         }
         return {
@@ -106,6 +108,7 @@ def load_candidates(path: str | os.PathLike) -> Candidates:
         medoids=data.get("medoids", np.zeros(0, dtype=np.int64)).astype(np.int64),
         quality_terms=_optional(data, "quality_terms", (n, 3)),
         center_of_mass=_optional(data, "center_of_mass", (3,)),
+        hold_margin=_optional(data, "hold_margin", (n,)),
     )
 
 
@@ -144,6 +147,8 @@ class GraspSet:
     grasps: list[dict[str, Any]]
     candidates: Candidates
     warnings: list[str] = field(default_factory=list)
+    #: the part's mass (kg) that criterion (e) used: given, or density x volume
+    mass_kg: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -151,7 +156,7 @@ class GraspSet:
             "units": "m",
             "object": dict(self.object),
             "gripper": self.gripper.to_dict(),
-            "params": self.params.to_dict(friction=self.friction),
+            "params": self.params.to_dict(friction=self.friction, mass_kg=self.mass_kg),
             "stats": self.stats,
             "grasps": self.grasps,
         }

@@ -88,10 +88,14 @@ class Params:
             raise InvalidParameterError("unknown parameters " + ", ".join(unknown), field=unknown[0])
         return cls(**data)
 
-    def to_dict(self, *, friction: float | None = None) -> dict[str, Any]:
+    def to_dict(self, *, friction: float | None = None, mass_kg: float | None = None) -> dict[str, Any]:
+        """The parameters as exported; `friction` and `mass_kg`: the values the run resolved (the gripper's
+        coefficient, density x volume)."""
         d = asdict(self)
         if friction is not None:
             d["friction"] = friction
+        if mass_kg is not None:
+            d["mass_kg"] = mass_kg
         return d
 
 

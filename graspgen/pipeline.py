@@ -12,8 +12,9 @@ from typing import Any
 import numpy as np
 import trimesh
 
-from . import antipodal, clustering, quality, sampling
+from . import antipodal, clustering, meshtree, quality, sampling
 from . import collision as _collision
+from . import hold as _hold
 from .coverage import coverage
 from .errors import InvalidParameterError, InvalidUnitsError
 from .export import Candidates, GraspSet
@@ -62,7 +63,11 @@ def generate(
     object_version: int | None = None,
     select: str = "medoid",
     validate: bool = False,
+    mass_kg: float | None = None,
     density: float | None = None,
+    accel: float = 9.81,
+    hold: str = "any",
+    position_tolerance: float = 0.001,
     repair_limit: int = 4,
     sim_workers: int | None = None,
 ) -> GraspSet:
@@ -73,11 +78,17 @@ def generate(
 
     Quality and validation (docs/QUALITY.md), all off by default: `select="best-near-medoid"` scores every
     candidate (quality.py) and exports, per final cluster, the best-scoring member near the medoid, best first;
-    `validate=True` simulates every exported grasp in MuJoCo (physics.py; part `density` in kg/m^3) and replaces a
-    failing one by up to `repair_limit` members of its cluster, nearest first.
+    `validate=True` simulates every exported grasp in MuJoCo (physics.py, with the part's mass and the gripper's
+    grip force) and replaces a failing one by up to `repair_limit` members of its cluster, nearest first.
+
+    Holding the part (CONTRACT.md, criterion (e), hold.py): with the part's mass (`mass_kg`, or `density` in
+    kg/m^3 times the mesh volume) and the gripper's `grip_force`, only candidates that hold the part against its
+    weight plus `accel` in every direction are kept (`hold="off"` skips it). `position_tolerance` (m): criterion
+    (c) holds for every surface normal within this distance of each contact. Every free roll is checked against
+    the mesh's triangles (meshtree.py).
     """
     report = progress or _noop
-    extras = _Extras.make(select, validate, density, repair_limit, sim_workers)
+    extras = _Extras.make(select, validate, repair_limit, sim_workers)
     spec = gripper if isinstance(gripper, GripperSpec) else GripperSpec.from_dict(gripper)
     params = Params(
         points=points,
@@ -89,6 +100,11 @@ def generate(
         inside=inside,
         collision=collision,
         seed=seed,
+        mass_kg=mass_kg,
+        density=density,
+        accel=accel,
+        hold=hold,
+        position_tolerance=position_tolerance,
     )
     mu = spec.friction if params.friction is None else params.friction
     timings: dict[str, float] = {}
@@ -103,6 +119,9 @@ def generate(
             raise InvalidUnitsError("units are required (mm, cm, m or in)", field="units")
         part = load_part(mesh_or_path, units=units, name=object_name)
     timings["load"] = time.perf_counter() - t0
+    mass, mass_note = _hold.part_mass(part, params.mass_kg, params.density)
+    if extras.validate:
+        _check_validation_inputs(mass, spec)
     report("load", 1.0)
 
     report("sample", 0.0)
@@ -111,6 +130,8 @@ def generate(
     cell = antipodal.pair_cell_size(spec.stroke, params.inside, spec.finger_thickness)
     order = antipodal.grid_order(sample.points, cell)
     pts, nrm = sample.points[order], sample.normals[order]
+    tree = meshtree.build_tree(part.mesh.vertices, part.mesh.faces) if part.mesh is not None else None
+    spread = _normal_spread(tree, pts, nrm, params.position_tolerance)
     timings["sample"] = time.perf_counter() - t0
     report("sample", 1.0)
 
@@ -131,14 +152,50 @@ def generate(
     report("pairs", 1.0)
 
     report("collision", 0.0)
-    ci, cj, free, inside = _collide_in_blocks(plan, pts, nrm, spec, params, timings, report)
+    ci, cj, free, inside, n_tolerance = _collide_in_blocks(
+        plan, pts, nrm, spec, params, timings, report, spread=spread, half_angle=half_angle
+    )
+    n_point_free = len(ci)
+
+    # criterion (e), then the mesh-exact check of the free rolls: both only on what is left
+    t0 = time.perf_counter()
+    com = quality.center_of_mass(part.mesh, part.points)
+    hold_on, hold_warning = _hold_active(params, spec, mass)
+    margins = None
+    hold_diag = None
+    n_hold = 0
+    if hold_on:
+        rho = _hold.torsion_radii(pts, nrm, _patch_radius(spec))
+        load = _hold.hold_load(mass, params.accel)
+        hold_args = dict(load=load, grip_force=spec.grip_force, friction=mu)
+        contacts_all = np.stack([pts[ci], pts[cj]], axis=1)
+        radii_all = np.stack([rho[ci], rho[cj]], axis=1)
+        margins = _hold.hold_margins(contacts_all, radii_all, com, floor=1.0, **hold_args)
+        keep = margins >= 1.0
+        n_hold = int(np.sum(~keep))
+        if n_point_free and not keep.any():
+            best = float(np.max(_hold.hold_margins(contacts_all, radii_all, com, **hold_args)))
+            hold_diag = _hold_diagnosis(best, spec, mass, params)
+        ci, cj, free, inside, margins = ci[keep], cj[keep], free[keep], inside[keep], margins[keep]
+    timings["hold"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    n_mesh_rolls = 0
+    if tree is not None and len(ci):
+        model = _collision.collision_model(spec, params.collision)
+        d = pts[cj] - pts[ci]
+        w = np.linalg.norm(d, axis=1)
+        exact = meshtree.mesh_free_rolls(tree, 0.5 * (pts[ci] + pts[cj]), d / w[:, None], w, inside, free, model)
+        n_mesh_rolls = int(free.sum() - exact.sum())
+        keep = exact.any(axis=1)
+        ci, cj, free, inside = ci[keep], cj[keep], exact[keep], inside[keep]
+        margins = margins[keep] if margins is not None else None
+    timings["collision"] += time.perf_counter() - t0
 
     fm = antipodal.friction_margin_deg(pts, nrm, ci, cj, inside, half_angle)
     contacts = np.stack([pts[ci], pts[cj]], axis=1).reshape(-1, 2, 3)
     normals = np.stack([nrm[ci], nrm[cj]], axis=1).reshape(-1, 2, 3)
     # every candidate is scored (quality.py): it orders the export, and `best-near-medoid` selects by it. The
     # contacts are sample points, so the patch flatness is computed once per point
-    com = quality.center_of_mass(part.mesh, part.points)
     flat = quality.point_flatness(pts, nrm, _patch_radius(spec))
     terms = quality.quality_terms(
         contacts,
@@ -160,12 +217,14 @@ def generate(
         medoids=np.zeros(0, dtype=np.int64),
         quality_terms=terms,
         center_of_mass=com,
+        hold_margin=margins,
     )
     rejected = {
         "stroke": plan.rejected_stroke,
         "outside": plan.rejected_outside,
-        "friction": plan.rejected_friction,
-        "collision": plan.accepted - len(cands),
+        "friction": plan.rejected_friction + n_tolerance,
+        "collision": plan.accepted - n_tolerance - n_point_free + (n_point_free - n_hold - len(cands)),
+        "hold": n_hold,
     }
     stats: dict[str, Any] = {
         "points": len(pts),
@@ -177,9 +236,26 @@ def generate(
         "spacing_min": float(sample.min_spacing),
         "watertight": bool(part.watertight),
         "warnings": list(part.warnings),
+        "exact": {
+            "friction_position_tolerance": n_tolerance,
+            "collision_mesh_rolls": n_mesh_rolls,
+            "collision_mesh_candidates": n_point_free - n_hold - len(cands),
+        },
     }
+    if hold_on:
+        stats["hold"] = {
+            "mass_kg": mass,
+            "load_n": _hold.hold_load(mass, params.accel),
+            "grip_force": spec.grip_force,
+            "friction": mu,
+            "center_of_mass": [float(v) for v in com],
+            "min_margin": float(np.min(margins)) if len(cands) else None,
+        }
+    for note in (hold_warning, mass_note):
+        if note:
+            stats["warnings"].append(note)
     if len(cands) == 0:
-        stats["empty_reason"] = _empty_reason(rejected, plan.pairs_total, spec, params, mu, pts, nrm)
+        stats["empty_reason"] = _empty_reason(rejected, plan.pairs_total, spec, params, mu, pts, nrm, hold_diag)
 
     obj = {
         "name": object_name or part.name,
@@ -187,7 +263,8 @@ def generate(
         "sha256": part.sha256,
         "source_units": part.source_units,
     }
-    extras = extras.with_part(part, (pts, nrm))
+    extras = extras.with_part(part, (pts, nrm), mass)
+    params = replace(params, hold="any" if hold_on else "off")
     result = _cluster_and_export(cands, obj, spec, params, mu, stats, report, t_all, list(part.warnings), extras)
     if recording is not None:
         from .recording import record_run
@@ -196,11 +273,13 @@ def generate(
     return result
 
 
-def _collide_in_blocks(plan, pts, nrm, spec: GripperSpec, params: Params, timings, report):
-    """Criterion (d) for every pair of `plan`, streamed in blocks of `_PAIR_BLOCK` pairs.
+def _collide_in_blocks(plan, pts, nrm, spec: GripperSpec, params: Params, timings, report, *, spread, half_angle):
+    """Criterion (c) with the position tolerance, then (d), for every pair of `plan`, streamed in blocks of
+    `_PAIR_BLOCK` pairs.
 
     Returns the surviving pairs (ci, cj), their free-roll masks and inside flags, in the order of
-    `antipodal_pairs`. Filling the pairs counts as the pairs stage, the rest as the collision stage.
+    `antipodal_pairs`, and how many pairs the position tolerance removed. Filling the pairs counts as the pairs
+    stage, the rest as the collision stage.
     """
     model = _collision.collision_model(spec, params.collision)
     m = plan.accepted
@@ -211,11 +290,17 @@ def _collide_in_blocks(plan, pts, nrm, spec: GripperSpec, params: Params, timing
     kept_free: list[np.ndarray] = []
     kept_inside: list[np.ndarray] = []
     n_kept = 0
+    n_tolerance = 0
     t_fill = t_coll = 0.0
     for r0, r1 in plan.blocks(_PAIR_BLOCK):
         t0 = time.perf_counter()
         bi, bj, bins = plan.fill(r0, r1)
         p0 = int(plan.offsets[r0])
+        if spread is not None:
+            ok = antipodal.within_spread(pts, nrm, bi, bj, bins, spread, half_angle)
+            if not ok.all():
+                n_tolerance += int(np.sum(~ok))
+                bi, bj, bins = bi[ok], bj[ok], bins[ok]
         t_fill += time.perf_counter() - t0
         t0 = time.perf_counter()
         free = np.zeros((len(bi), params.rolls), dtype=bool)
@@ -245,8 +330,65 @@ def _collide_in_blocks(plan, pts, nrm, spec: GripperSpec, params: Params, timing
         report("collision", 1.0)  # otherwise the last segment reported it
     if not kept_i:
         e = np.zeros(0, dtype=np.int64)
-        return e, e.copy(), np.zeros((0, params.rolls), dtype=bool), np.zeros(0, dtype=bool)
-    return np.concatenate(kept_i), np.concatenate(kept_j), np.concatenate(kept_free), np.concatenate(kept_inside)
+        return e, e.copy(), np.zeros((0, params.rolls), dtype=bool), np.zeros(0, dtype=bool), n_tolerance
+    cat = np.concatenate
+    return cat(kept_i), cat(kept_j), cat(kept_free), cat(kept_inside), n_tolerance
+
+
+def _normal_spread(tree, pts, nrm, tolerance: float) -> np.ndarray | None:
+    """Per sample point, the largest angle (rad) between its normal and a surface normal within `tolerance`: of
+    the mesh's triangles, or for a point cloud of the other sample points; None when nothing is near."""
+    if tolerance <= 0 or len(pts) == 0:
+        return None
+    if tree is not None:
+        spread = meshtree.normal_spread_rad(tree, pts, nrm, tolerance)
+    else:
+        from scipy.spatial import cKDTree
+
+        spread = np.zeros(len(pts))
+        for a, hood in enumerate(cKDTree(pts).query_ball_point(pts, r=tolerance)):
+            spread[a] = float(np.arccos(np.clip(np.min(nrm[hood] @ nrm[a]), -1.0, 1.0)))
+    return spread if np.any(spread > 0) else None
+
+
+def _check_validation_inputs(mass: float | None, spec: GripperSpec) -> None:
+    if mass is None:
+        raise InvalidParameterError("validate needs the part's mass: give mass_kg or density", field="mass_kg")
+    if spec.grip_force is None:
+        raise InvalidParameterError("validate needs the gripper's grip_force (N per finger)", field="grip_force")
+
+
+def _hold_active(params: Params, spec: GripperSpec, mass: float | None) -> tuple[bool, str | None]:
+    """Whether criterion (e) runs, and the warning when it was asked for but cannot."""
+    if params.hold == "off":
+        return False, None
+    missing = [
+        what
+        for what, absent in (
+            ("the part's mass (mass_kg or density)", mass is None),
+            ("the gripper's grip_force", spec.grip_force is None),
+        )
+        if absent
+    ]
+    if missing:
+        return False, "criterion (e) hold is off: it needs " + " and ".join(missing)
+    return True, None
+
+
+def _hold_diagnosis(best: float, spec: GripperSpec, mass: float, params: Params) -> dict[str, Any]:
+    """What would make the best candidate hold: the margin scales with the grip force over the load."""
+    need_force = spec.grip_force / best if best > 0 else math.inf
+    max_mass = mass * best
+    return {
+        "best_margin": best,
+        "grip_force_needed": need_force,
+        "max_mass_kg": max_mass,
+        "message": (
+            f"no candidate holds the part (criterion (e)): the best resists {best:.2f} of the load "
+            f"({mass:g} kg at {params.accel:g} m/s^2 beyond gravity); it needs at least {need_force:.1f} N per finger "
+            f"(the gripper has {spec.grip_force:g} N), or a part under {max_mass:.3f} kg"
+        ),
+    }
 
 
 def recluster(
@@ -260,6 +402,7 @@ def recluster(
     progress: Progress | None = None,
     select: str = "medoid",
     validate: bool = False,
+    mass_kg: float | None = None,
     density: float | None = None,
     repair_limit: int = 4,
     sim_workers: int | None = None,
@@ -274,12 +417,15 @@ def recluster(
     from .export import load_candidates
 
     report = progress or _noop
-    extras = _Extras.make(select, validate, density, repair_limit, sim_workers)
+    extras = _Extras.make(select, validate, repair_limit, sim_workers)
     t_all = time.perf_counter()
     cands = candidates if isinstance(candidates, Candidates) else load_candidates(candidates)
     spec = GripperSpec.from_dict(previous_export["gripper"])
     old = dict(previous_export["params"])
     mu = float(old.get("friction") or spec.friction)
+    # the export carries the mass the run resolved beside the density it may have come from
+    run_mass = old.pop("mass_kg", None)
+    old.pop("density", None)
     params = Params.from_dict({**old, "k1": k1, "k2": k2, "seed": seed, "friction": mu})
     if len(cands.roll_angles_rad) != params.rolls:
         raise InvalidParameterError("the candidates' roll count differs from the export's params.rolls")
@@ -297,11 +443,16 @@ def recluster(
             "validation, and quality selection of candidates stored without quality terms, need the part (mesh=)",
             field="mesh",
         )
+    if mass_kg is not None or density is not None:
+        Params(mass_kg=mass_kg, density=density)  # the same checks as generate's
+        run_mass, _ = _hold.part_mass(part, mass_kg, density) if part is not None else (mass_kg, None)
+    if extras.validate:
+        _check_validation_inputs(run_mass, spec)
     surface = None
     if extras.select != "medoid" and cands.quality_terms is None:
         surface = _surface_for_quality(part, params)
         cands = _with_quality(cands, part, *surface, spec, mu, params)
-    extras = extras.with_part(part, surface)
+    extras = extras.with_part(part, surface, run_mass)
     result = _cluster_and_export(
         cands, dict(previous_export["object"]), spec, params, mu, stats, report, t_all, [], extras
     )
@@ -374,6 +525,8 @@ def _cluster_and_export(cands, obj, spec, params, mu, stats, report, t_all, warn
             g["quality"] = quality.describe(terms[r], key[r])
         if m != medoid_of[r]:
             g["medoid"] = int(medoid_of[r])  # the cluster's medoid this grasp stands in for
+        if cands.hold_margin is not None:
+            g["hold_margin"] = round(float(cands.hold_margin[m]), 6)
         if sim is not None:
             g["sim"] = sim[order[r]].to_json()
     stats["coverage"] = coverage(cands.midpoints, cands.axes, medoids).to_json()
@@ -388,6 +541,7 @@ def _cluster_and_export(cands, obj, spec, params, mu, stats, report, t_all, warn
         grasps=grasps,
         candidates=cands,
         warnings=warnings,
+        mass_kg=extras.mass_kg,
     )
 
 
@@ -450,7 +604,7 @@ def _grasps(cands: Candidates, medoids, clusters, sizes) -> list[dict[str, Any]]
     return out
 
 
-def _empty_reason(rejected, total, spec: GripperSpec, params: Params, mu: float, pts, nrm) -> dict[str, str]:
+def _empty_reason(rejected, total, spec: GripperSpec, params: Params, mu: float, pts, nrm, hold_diag=None) -> dict:
     """Which criterion removed the last pairs, and what to change.
 
     Pairs on one face or adjacent faces fail (b) or (c) whatever the stroke, so when (b) or (c) removed the last
@@ -459,10 +613,12 @@ def _empty_reason(rejected, total, spec: GripperSpec, params: Params, mu: float,
     """
     left = total
     criterion = "stroke"
-    for criterion in ("stroke", "outside", "friction", "collision"):
+    for criterion in ("stroke", "outside", "friction", "collision", "hold"):
         left -= rejected[criterion]
         if left <= 0:
             break
+    if criterion == "hold" and hold_diag is not None:
+        return {"criterion": "hold", **hold_diag}
     narrowest = None
     if criterion in ("outside", "friction") and len(pts) > 1:
         diag = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
@@ -516,30 +672,22 @@ class _Extras:
 
     select: str = "medoid"
     validate: bool = False
-    density: float | None = None
     repair_limit: int = 4
     sim_workers: int | None = None
     part: Part | None = None
+    #: the part's mass (kg) for the validation
+    mass_kg: float | None = None
     #: the sampled surface (points, normals) of `part`, for the flatness term, when the run has it
     surface: tuple[np.ndarray, np.ndarray] | None = None
 
     @classmethod
-    def make(cls, select, validate, density, repair_limit, sim_workers) -> _Extras:
+    def make(cls, select, validate, repair_limit, sim_workers) -> _Extras:
         if select not in quality.SELECT_MODES:
             raise InvalidParameterError(
                 f"select must be one of {', '.join(quality.SELECT_MODES)}, got {select!r}", field="select"
             )
         if not isinstance(validate, bool):
             raise InvalidParameterError(f"validate must be true or false, got {validate!r}", field="validate")
-        if density is not None and (
-            isinstance(density, bool)
-            or not isinstance(density, (int, float))
-            or not math.isfinite(density)
-            or not 1.0 <= density <= 100_000.0
-        ):
-            raise InvalidParameterError(
-                f"density must be between 1 and 100000 kg/m^3, got {density!r}", field="density"
-            )
         if isinstance(repair_limit, bool) or not isinstance(repair_limit, int) or not 0 <= repair_limit <= 64:
             raise InvalidParameterError(
                 f"repair_limit must be an integer 0..64, got {repair_limit!r}", field="repair_limit"
@@ -550,10 +698,10 @@ class _Extras:
             raise InvalidParameterError(
                 f"sim_workers must be a positive integer, got {sim_workers!r}", field="sim_workers"
             )
-        return cls(select, validate, None if density is None else float(density), repair_limit, sim_workers)
+        return cls(select, validate, repair_limit, sim_workers)
 
-    def with_part(self, part: Part | None, surface: tuple[np.ndarray, np.ndarray] | None = None) -> _Extras:
-        return replace(self, part=part, surface=surface)
+    def with_part(self, part: Part | None, surface=None, mass_kg: float | None = None) -> _Extras:
+        return replace(self, part=part, surface=surface, mass_kg=mass_kg)
 
 
 def _mean(values: np.ndarray) -> float | None:
@@ -625,8 +773,7 @@ def _validate(cands, labels, selected, clusters, spec, mu, params, extras: _Extr
     else:
         mesh = trimesh.convex.convex_hull(np.asarray(part.points))
         note = "a point cloud has no surface to simulate: simulated as the convex hull of its points"
-    density = extras.density or physics.DEFAULT_DENSITY
-    sim_part = physics.prepare_part(mesh, spec, friction=mu, density=density, seed=params.seed)
+    sim_part = physics.prepare_part(mesh, spec, friction=mu, mass_kg=extras.mass_kg, seed=params.seed)
     report("validate", 0.1)
     widths = cands.widths
     run = lambda idx: physics.simulate_grasps(  # noqa: E731
@@ -676,7 +823,8 @@ def _validate(cands, labels, selected, clusters, spec, mu, params, extras: _Extr
         "repaired": int(np.sum(final != selected)),
         "repair_limit": extras.repair_limit,
         "simulated": simulated,
-        "density": density,
+        "mass_kg": extras.mass_kg,
+        "grip_force": spec.grip_force,
         "part": part_info,
         "engine": f"mujoco {mujoco.__version__}",
     }

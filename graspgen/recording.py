@@ -152,7 +152,8 @@ def _log(stream, result, points, normals, extra) -> None:
             half.append(np.asarray(box.extents) / 2)
             quats.append(rr.Quaternion(xyzw=q))
             colours.append(colour)
-            names.append(f"#{rank} c{g['cluster'][0]}.{g['cluster'][1]}")
+            hold = f" hold x{g['hold_margin']:.2f}" if "hold_margin" in g else ""
+            names.append(f"#{rank} c{g['cluster'][0]}.{g['cluster'][1]}{hold}")
     if centers:
         stream.log(
             "grasps/grippers",
@@ -168,7 +169,7 @@ def _log(stream, result, points, normals, extra) -> None:
     _log_coverage(stream, result.stats)
     summary = {
         "object": result.object,
-        "params": result.params.to_dict(friction=result.friction),
+        "params": result.params.to_dict(friction=result.friction, mass_kg=result.mass_kg),
         "stats": result.stats,
         "grasps": len(result.grasps),
         **(extra or {}),

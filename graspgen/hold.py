@@ -1,0 +1,370 @@
+"""Criterion (e) `hold`: do two soft-finger contacts, pressed with the gripper's force, hold the part's load?
+
+The paper's criteria (a)-(d) are geometric. A grasp far from the centre of mass, or on a patch that the pad touches
+in a point only, lets the part turn about the closing axis: only the pads' torsional friction resists that torque.
+
+Model (SI units). A candidate's contacts c0, c1 lie on the closing axis x at -h and +h (h = width / 2); each pad
+presses with the normal force F = `grip_force`. The load is a force of magnitude W = m (g + accel) at the centre of
+mass, in any direction d relative to the gripper (the robot turns and accelerates the part after the pick), and its
+moment about the contact midpoint. The load along x is carried by the coupled fingers. The rest is shared by the
+contacts, and for two point-like contacts on one axis the split is fixed by statics:
+
+- the tangential (y, z) force and the moments about y and z give each contact a tangential force t0, t1
+  (t0 + t1 balances the force, h (t1 - t0) the moments);
+- the moment about x can only be resisted by the pads' torsional friction m0 + m1, split freely.
+
+Each contact is a soft finger with an elliptic limit surface, (|t| / (mu F))^2 + (m / (mu F rho))^2 <= 1, where rho
+is the contact's torsion radius: the mean distance, from the contact, of the patch that the pad touches (a flat
+face gives a patch as large as the pad, a curved surface or an edge nearly a point). The load at scale s is held
+when s |t_i| <= mu F for both contacts and sum_i rho_i mu F sqrt(1 - (s |t_i| / (mu F))^2) >= s |moment about x|.
+The hold margin is the largest s that holds in every direction d (the ratio of the load the grasp resists to the
+load required); criterion (e) keeps margins >= 1. Directions: `HOLD.directions` on a half sphere (d and -d need the
+same), refined twice around the worst; the margin is exact for the directions tried and the continuous minimum
+lies within a fraction of a per cent of it (a check in tests/graspgen/test_hold.py).
+
+The patch of a sample point p with normal n: the sample points q under the pad's inscribed disc (radius
+min(finger_width, finger_depth) / 2 around p in the plane normal to n) that lie within `pad_compliance` of that
+plane with normals within `patch_normal_deg` of n. Sample points stand for equal areas (the sampling is blue
+noise), so the mean over them is the mean over the patch. rho is floored at `min_torsion_radius`: even a point
+contact spreads a little on a pad.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit, prange
+
+_CHUNK = 1024  # candidates per unit of parallel work
+
+__all__ = ["HoldModel", "HOLD", "torsion_radii", "hold_margins", "part_mass", "hold_load"]
+
+
+@dataclass(frozen=True)
+class HoldModel:
+    """The constants of criterion (e) in one place (metres unless named otherwise)."""
+
+    #: how far behind the pad's plane the surface may lie and still bear on the pad
+    pad_compliance: float = 0.05e-3
+    #: surface whose normal differs from the contact's by more than this is not part of the patch
+    patch_normal_deg: float = 20.0
+    #: torsion radius of a point contact on a pad (a Hertz-like spot of about 1.5 mm)
+    min_torsion_radius: float = 0.5e-3
+    #: load directions on the half sphere (then refined three times around the worst)
+    directions: int = 32
+    #: bisection steps for a direction's limit scale (relative precision 2^-steps of the bracket)
+    bisection_steps: int = 30
+    #: margins are reported up to this value (a part with no load at all holds without limit)
+    max_margin: float = 1.0e6
+
+
+HOLD = HoldModel()
+
+
+def hold_load(mass_kg: float, accel: float, gravity: float = 9.81) -> float:
+    """W (N): the part's weight plus `accel` (m/s^2) of acceleration, the worst case in any direction."""
+    return float(mass_kg) * (float(gravity) + float(accel))
+
+
+def part_mass(part, mass_kg: float | None, density: float | None) -> tuple[float | None, str | None]:
+    """The part's mass (kg) from `mass_kg` or `density` (kg/m^3) x the volume, and a note when the volume had to be
+    taken from the convex hull (an open mesh or a point cloud has no volume of its own)."""
+    if mass_kg is not None:
+        return float(mass_kg), None
+    if density is None:
+        return None, None
+    mesh = part.mesh
+    if mesh is not None and mesh.is_watertight and mesh.volume > 0:
+        return float(density) * float(mesh.volume), None
+    import trimesh
+
+    pts = np.asarray(mesh.vertices if mesh is not None else part.points, dtype=np.float64)
+    hull = trimesh.convex.convex_hull(pts)
+    what = "the mesh is not closed" if mesh is not None else "a point cloud has no volume"
+    return float(density) * float(hull.volume), f"mass from density uses the convex hull's volume: {what}"
+
+
+def torsion_radii(points: np.ndarray, normals: np.ndarray, pad_radius: float, model: HoldModel = HOLD) -> np.ndarray:
+    """Torsion radius rho (k,) metres of the patch a pad of radius `pad_radius` touches at each sample point.
+
+    `points`, `normals`: (k, 3) float64, the evenly spaced surface sample with outward unit normals."""
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    nrm = np.ascontiguousarray(normals, dtype=np.float64).reshape(-1, 3)
+    k = len(pts)
+    if k == 0:
+        return np.zeros(0, dtype=np.float64)
+    cell = max(float(pad_radius), 1e-9)
+    origin = pts.min(axis=0)
+    idx = np.floor((pts - origin) / cell).astype(np.int64)
+    dims = idx.max(axis=0) + 1
+    flat = (idx[:, 0] * dims[1] + idx[:, 1]) * dims[2] + idx[:, 2]
+    order = np.argsort(flat, kind="stable")
+    cell_start = np.zeros(int(np.prod(dims)) + 1, dtype=np.int64)
+    np.cumsum(np.bincount(flat, minlength=int(np.prod(dims))), out=cell_start[1:])
+    out = np.empty(k, dtype=np.float64)
+    _radii_kernel(
+        pts[order],
+        nrm[order],
+        idx[order],
+        cell_start,
+        dims.astype(np.int64),
+        float(pad_radius),
+        float(model.pad_compliance),
+        math.cos(math.radians(model.patch_normal_deg)),
+        float(model.min_torsion_radius),
+        out,
+    )
+    result = np.empty_like(out)
+    result[order] = out
+    return result
+
+
+@njit(parallel=True, cache=True)
+def _radii_kernel(P, N, cells, cell_start, dims, R, depth, cos_min, rho_min, out):
+    R2 = R * R
+    for i in prange(P.shape[0]):
+        total = 0.0
+        count = 0
+        ci, cj, ck = cells[i, 0], cells[i, 1], cells[i, 2]
+        for a in range(max(ci - 1, 0), min(ci + 2, dims[0])):
+            for b in range(max(cj - 1, 0), min(cj + 2, dims[1])):
+                col = (a * dims[1] + b) * dims[2]
+                for j in range(cell_start[col + max(ck - 1, 0)], cell_start[col + min(ck + 2, dims[2])]):
+                    dx = P[j, 0] - P[i, 0]
+                    dy = P[j, 1] - P[i, 1]
+                    dz = P[j, 2] - P[i, 2]
+                    off = dx * N[i, 0] + dy * N[i, 1] + dz * N[i, 2]
+                    # the part lies on the inner side (-n): the pad's plane touches at p, the patch bears on it
+                    if abs(off) > depth:
+                        continue
+                    if N[j, 0] * N[i, 0] + N[j, 1] * N[i, 1] + N[j, 2] * N[i, 2] < cos_min:
+                        continue
+                    r2 = dx * dx + dy * dy + dz * dz - off * off
+                    if r2 <= R2:
+                        total += np.sqrt(max(r2, 0.0))
+                        count += 1
+        out[i] = max(total / max(count, 1), rho_min)
+
+
+def _half_sphere(count: int) -> np.ndarray:
+    """`count` unit vectors spread evenly over the half sphere x >= 0 (a Fibonacci lattice), (count, 3)."""
+    k = np.arange(count, dtype=np.float64) + 0.5
+    x = k / count  # uniform in [0, 1]: equal areas on the half sphere
+    phi = k * math.pi * (3.0 - math.sqrt(5.0))
+    s = np.sqrt(1.0 - x * x)
+    return np.ascontiguousarray(np.stack([x, s * np.cos(phi), s * np.sin(phi)], axis=1))
+
+
+def hold_margins(
+    contacts: np.ndarray,
+    radii: np.ndarray,
+    center_of_mass: np.ndarray,
+    *,
+    load: float,
+    grip_force: float,
+    friction: float,
+    model: HoldModel = HOLD,
+    floor: float = 0.0,
+) -> np.ndarray:
+    """Hold margin (n,) float64 of candidates with `contacts` (n, 2, 3) metres and torsion radii `radii` (n, 2)
+    metres, for a load of `load` N (hold_load) at `center_of_mass` (3,), `grip_force` N per finger and Coulomb
+    `friction`. >= 1: the grasp holds (criterion (e)). With `floor` > 0, a candidate stops as soon as its margin is
+    known to be below `floor` and reports an upper bound of it (below `floor`): criterion (e) needs no more."""
+    contacts = np.ascontiguousarray(contacts, dtype=np.float64).reshape(-1, 2, 3)
+    radii = np.ascontiguousarray(radii, dtype=np.float64).reshape(-1, 2)
+    if len(radii) != len(contacts):
+        raise ValueError("radii must be (n, 2) for n candidates")
+    com = np.ascontiguousarray(center_of_mass, dtype=np.float64).reshape(3)
+    out = np.empty(len(contacts), dtype=np.float64)
+    if len(contacts) == 0:
+        return out
+    _margins_kernel(
+        contacts,
+        radii,
+        com,
+        float(load),
+        float(friction) * float(grip_force),
+        _half_sphere(model.directions),
+        int(model.bisection_steps),
+        float(model.max_margin),
+        float(floor),
+        out,
+    )
+    return out
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _slack(s, a0, a1, b, c0, c1):
+    """Torsional capacity left at load scale s (>= 0: held), -1 when a contact's tangential load alone slips."""
+    u0 = a0 * s
+    u1 = a1 * s
+    if u0 > 1.0 or u1 > 1.0:
+        return -1.0
+    return c0 * np.sqrt(1.0 - u0 * u0) + c1 * np.sqrt(1.0 - u1 * u1) - b * s
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _coeffs(dx, dy, dz, rx, ry, rz, inv_h, w_cap, W):
+    """In direction d (local frame, x = closing axis), per unit load scale: a0, a1 = each contact's tangential
+    load over its friction capacity mu F, b = the moment about x (N m)."""
+    mx = ry * dz - rz * dy
+    my = rz * dx - rx * dz
+    mz = rx * dy - ry * dx
+    # h (t1 - t0) balances the moments about y and z, t0 + t1 the force along y and z
+    ddy = -mz * inv_h
+    ddz = my * inv_h
+    a0 = 0.5 * w_cap * np.sqrt((dy + ddy) ** 2 + (dz + ddz) ** 2)
+    a1 = 0.5 * w_cap * np.sqrt((dy - ddy) ** 2 + (dz - ddz) ** 2)
+    return a0, a1, W * abs(mx)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _lower(a0, a1, b, c0, c1, inv_c):
+    """A lower bound of the direction's limit scale: sqrt(1 - u^2) >= 1 - u makes the slack linear in s."""
+    top = max(a0, a1, (c0 * a0 + c1 * a1 + b) * inv_c)
+    return np.inf if top <= 0.0 else 1.0 / top
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _limit(best, a0, a1, b, c0, c1, inv_c, steps):
+    """min(best, the largest load scale held in the direction with coefficients a0, a1, b)."""
+    lo = _lower(a0, a1, b, c0, c1, inv_c)
+    if lo >= best:
+        return best
+    hi = best
+    if a0 > 0.0:
+        hi = min(hi, 1.0 / a0)
+    if a1 > 0.0:
+        hi = min(hi, 1.0 / a1)
+    if b > 0.0:
+        hi = min(hi, (c0 + c1) / b)
+    g_hi = _slack(hi, a0, a1, b, c0, c1)
+    if g_hi >= 0.0:
+        return hi
+    g_lo = _slack(lo, a0, a1, b, c0, c1)
+    # Illinois (regula falsi): the slack is concave and falls on [lo, hi]; the held side lo is kept exact
+    side = 0
+    for _ in range(steps):
+        if hi - lo <= 1e-9 * hi:
+            break
+        mid = (lo * g_hi - hi * g_lo) / (g_hi - g_lo)
+        if not (lo < mid < hi):
+            mid = 0.5 * (lo + hi)
+        g = _slack(mid, a0, a1, b, c0, c1)
+        if g >= 0.0:
+            lo, g_lo = mid, g
+            if side == 1:
+                g_hi *= 0.5
+            side = 1
+        else:
+            hi, g_hi = mid, g
+            if side == -1:
+                g_lo *= 0.5
+            side = -1
+    return lo
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _margins_kernel(C, rho, com, W, cap, dirs, steps, max_margin, floor, out):
+    K = dirs.shape[0]
+    # refinement: around the worst direction, 8 neighbours at 1/2, 1/4 and 1/8 of the lattice spacing
+    spacing = np.sqrt(2.0 * np.pi / K)
+    ring_c = np.cos(np.arange(8) * np.pi / 4.0)
+    ring_s = np.sin(np.arange(8) * np.pi / 4.0)
+    w_cap = W / cap
+    N = C.shape[0]
+    chunks = (N + _CHUNK - 1) // _CHUNK
+    for ch in prange(chunks):
+        co = np.empty((K, 3))
+        for n in range(ch * _CHUNK, min(N, (ch + 1) * _CHUNK)):
+            out[n] = _margin_one(
+                C, rho, com, W, cap, dirs, steps, max_margin, floor, n, co, spacing, ring_c, ring_s, w_cap
+            )
+
+
+@njit(cache=True, error_model="numpy")
+def _margin_one(C, rho, com, W, cap, dirs, steps, max_margin, floor, n, co, spacing, ring_c, ring_s, w_cap):
+    K = dirs.shape[0]
+    if True:
+        ax = C[n, 1, 0] - C[n, 0, 0]
+        ay = C[n, 1, 1] - C[n, 0, 1]
+        az = C[n, 1, 2] - C[n, 0, 2]
+        w = np.sqrt(ax * ax + ay * ay + az * az)
+        ax, ay, az = ax / w, ay / w, az / w
+        # any orthonormal (e1, e2) perpendicular to the axis: the model is symmetric about it
+        if abs(ax) < 0.9:
+            ux, uy, uz = 1.0, 0.0, 0.0
+        else:
+            ux, uy, uz = 0.0, 1.0, 0.0
+        e1x = uy * az - uz * ay
+        e1y = uz * ax - ux * az
+        e1z = ux * ay - uy * ax
+        l1 = np.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
+        e1x, e1y, e1z = e1x / l1, e1y / l1, e1z / l1
+        e2x = ay * e1z - az * e1y
+        e2y = az * e1x - ax * e1z
+        e2z = ax * e1y - ay * e1x
+        mx = 0.5 * (C[n, 0, 0] + C[n, 1, 0])
+        my = 0.5 * (C[n, 0, 1] + C[n, 1, 1])
+        mz = 0.5 * (C[n, 0, 2] + C[n, 1, 2])
+        qx, qy, qz = com[0] - mx, com[1] - my, com[2] - mz
+        rx = qx * ax + qy * ay + qz * az
+        ry = qx * e1x + qy * e1y + qz * e1z
+        rz = qx * e2x + qy * e2y + qz * e2z
+        inv_h = 2.0 / w
+        c0 = cap * rho[n, 0]
+        c1 = cap * rho[n, 1]
+        inv_c = 1.0 / (c0 + c1)
+        # the direction with the lowest lower bound first: most other directions then end at their bound
+        first = 0
+        low = np.inf
+        for k in range(K):
+            a0, a1, b = _coeffs(dirs[k, 0], dirs[k, 1], dirs[k, 2], rx, ry, rz, inv_h, w_cap, W)
+            co[k, 0], co[k, 1], co[k, 2] = a0, a1, b
+            lb = _lower(a0, a1, b, c0, c1, inv_c)
+            if lb < low:
+                low = lb
+                first = k
+        best = _limit(max_margin, co[first, 0], co[first, 1], co[first, 2], c0, c1, inv_c, steps)
+        worst = first
+        if best >= floor:
+            for k in range(K):
+                s = _limit(best, co[k, 0], co[k, 1], co[k, 2], c0, c1, inv_c, steps)
+                if s < best:
+                    best = s
+                    worst = k
+                    if best < floor:
+                        break
+        dx, dy, dz = dirs[worst, 0], dirs[worst, 1], dirs[worst, 2]
+        step = 0.5 * spacing
+        for _ in range(3):
+            if best < floor:
+                break
+            # two tangent vectors at d
+            if abs(dx) < 0.9:
+                px, py, pz = 0.0, -dz, dy
+            else:
+                px, py, pz = dz, 0.0, -dx
+            lp = np.sqrt(px * px + py * py + pz * pz)
+            px, py, pz = px / lp, py / lp, pz / lp
+            qx2 = dy * pz - dz * py
+            qy2 = dz * px - dx * pz
+            qz2 = dx * py - dy * px
+            bx, by, bz = dx, dy, dz
+            for j in range(8):
+                ca = ring_c[j] * step
+                sa = ring_s[j] * step
+                vx = bx + ca * px + sa * qx2
+                vy = by + ca * py + sa * qy2
+                vz = bz + ca * pz + sa * qz2
+                lv = np.sqrt(vx * vx + vy * vy + vz * vz)
+                a0, a1, b = _coeffs(vx / lv, vy / lv, vz / lv, rx, ry, rz, inv_h, w_cap, W)
+                s = _limit(best, a0, a1, b, c0, c1, inv_c, steps)
+                if s < best:
+                    best = s
+                    dx, dy, dz = vx / lv, vy / lv, vz / lv
+            step *= 0.5
+        return min(best, max_margin)
+    return max_margin

@@ -1,0 +1,415 @@
+"""The part's own triangles: a bounding-volume tree over them and the exact queries that the sampled points cannot
+answer.
+
+- `normal_spread_rad`: for each sample point, the largest angle between its normal and the normal of any triangle
+  within `position_tolerance` of it. Criterion (c) with a position tolerance then asks the friction cone to hold
+  for every one of them: a contact on or next to an edge is not taken for a point on a face.
+- `mesh_free_rolls`: criterion (d) against the triangles themselves. The point test can miss a feature that falls
+  between samples; here every roll the point test left free is tested again, exactly, with the same boxes: a roll
+  stays free only when no triangle meets any of the gripper's boxes at that roll (closed boxes; separating-axis
+  tests of triangle against box).
+
+The tree: a binary tree over triangle centroids, split at the median of the longest axis, at most `_LEAF`
+triangles per leaf; per node an axis-aligned box and a ball (centre, radius) around its triangles. A query walks
+the tree once per candidate and carries the set of rolls still undecided: a node is entered only at the rolls at
+which its ball touches one of the boxes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from .collision import CollisionModel, _basis, _regions, _x_ranges
+
+__all__ = ["MeshTree", "build_tree", "normal_spread_rad", "mesh_free_rolls"]
+
+_LEAF = 4
+_CHUNK = 256  # candidates per unit of parallel work
+
+
+class MeshTree:
+    """Triangles (m, 3, 3) metres, their unit normals (m, 3), and the tree's arrays (see `build_tree`)."""
+
+    def __init__(self, triangles: np.ndarray, normals: np.ndarray, nodes: np.ndarray, children: np.ndarray):
+        self.triangles = triangles
+        self.normals = normals
+        self.nodes = nodes
+        self.children = children
+
+    def __len__(self) -> int:
+        return len(self.triangles)
+
+
+def build_tree(vertices: np.ndarray, faces: np.ndarray) -> MeshTree:
+    """A tree over the mesh's non-degenerate triangles. `vertices` (v, 3) float64 metres, `faces` (m, 3) int."""
+    V = np.asarray(vertices, dtype=np.float64)
+    F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    tri = V[F]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    area2 = np.linalg.norm(n, axis=1)
+    keep = area2 > 1e-20
+    tri, n, area2 = tri[keep], n[keep], area2[keep]
+    n = n / area2[:, None]
+    m = len(tri)
+    max_nodes = 2 * m + 1
+    order = np.arange(m, dtype=np.int64)
+    nodes = np.zeros((max_nodes, 8), dtype=np.float64)  # see _build
+    children = np.zeros((max_nodes, 4), dtype=np.int64)  # left, right, start, count
+    count = _build(np.ascontiguousarray(tri), order, nodes, children) if m else 0
+    tri = np.ascontiguousarray(tri[order])
+    n = np.ascontiguousarray(n[order])
+    return MeshTree(tri, n, nodes[:count].copy(), children[:count].copy())
+
+
+@njit(cache=True)
+def _build(T, order, nodes, children):
+    """Fill nodes[k] = (centre x, y, z, ball radius, half extents x, y, z of the box, unused) and
+    children[k] = (left, right, start, count); leaves have left = -1. Returns the node count."""
+    m = T.shape[0]
+    cen = np.empty((m, 3))
+    for t in range(m):
+        for a in range(3):
+            cen[t, a] = (T[t, 0, a] + T[t, 1, a] + T[t, 2, a]) / 3.0
+    stack = np.empty((128, 3), dtype=np.int64)  # node, start, stop
+    top = 0
+    stack[0, 0], stack[0, 1], stack[0, 2] = 0, 0, m
+    top = 1
+    count = 1
+    while top > 0:
+        top -= 1
+        k, a0, b0 = stack[top, 0], stack[top, 1], stack[top, 2]
+        lo = np.full(3, np.inf)
+        hi = np.full(3, -np.inf)
+        clo = np.full(3, np.inf)
+        chi = np.full(3, -np.inf)
+        for q in range(a0, b0):
+            t = order[q]
+            for v in range(3):
+                for a in range(3):
+                    lo[a] = min(lo[a], T[t, v, a])
+                    hi[a] = max(hi[a], T[t, v, a])
+            for a in range(3):
+                clo[a] = min(clo[a], cen[t, a])
+                chi[a] = max(chi[a], cen[t, a])
+        c = 0.5 * (lo + hi)
+        r2 = 0.0
+        for q in range(a0, b0):
+            t = order[q]
+            for v in range(3):
+                d = (T[t, v, 0] - c[0]) ** 2 + (T[t, v, 1] - c[1]) ** 2 + (T[t, v, 2] - c[2]) ** 2
+                r2 = max(r2, d)
+        nodes[k, 0], nodes[k, 1], nodes[k, 2] = c[0], c[1], c[2]
+        nodes[k, 3] = np.sqrt(r2) * (1.0 + 1e-12) + 1e-15
+        nodes[k, 4], nodes[k, 5], nodes[k, 6] = 0.5 * (hi[0] - lo[0]), 0.5 * (hi[1] - lo[1]), 0.5 * (hi[2] - lo[2])
+        children[k, 2], children[k, 3] = a0, b0 - a0
+        if b0 - a0 <= _LEAF:
+            children[k, 0], children[k, 1] = -1, -1
+            continue
+        axis = 0
+        if chi[1] - clo[1] > chi[axis] - clo[axis]:
+            axis = 1
+        if chi[2] - clo[2] > chi[axis] - clo[axis]:
+            axis = 2
+        seg = order[a0:b0]
+        keys = cen[seg, axis]
+        idx = np.argsort(keys, kind="mergesort")
+        order[a0:b0] = seg[idx]
+        mid = (a0 + b0) // 2
+        left, right = count, count + 1
+        count += 2
+        children[k, 0], children[k, 1] = left, right
+        stack[top, 0], stack[top, 1], stack[top, 2] = left, a0, mid
+        stack[top + 1, 0], stack[top + 1, 1], stack[top + 1, 2] = right, mid, b0
+        top += 2
+    return count
+
+
+# -- normals within a distance -------------------------------------------------------------------------------------
+
+
+def normal_spread_rad(tree: MeshTree, points: np.ndarray, normals: np.ndarray, tolerance: float) -> np.ndarray:
+    """(k,) float64 radians: for each point, the largest angle between its normal and the normal of a triangle
+    within `tolerance` metres of it (0 when only faces parallel to its own are near)."""
+    P = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    N = np.ascontiguousarray(normals, dtype=np.float64).reshape(-1, 3)
+    out = np.zeros(len(P), dtype=np.float64)
+    if len(P) == 0 or len(tree) == 0 or tolerance <= 0:
+        return out
+    _spread_kernel(P, N, tree.triangles, tree.normals, tree.nodes, tree.children, float(tolerance), out)
+    return out
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _spread_kernel(P, N, T, TN, nodes, children, tol, out):
+    for i in prange(P.shape[0]):
+        px, py, pz = P[i, 0], P[i, 1], P[i, 2]
+        lowest = 1.0
+        stack = np.empty(64, dtype=np.int64)
+        stack[0] = 0
+        top = 1
+        while top > 0:
+            top -= 1
+            k = stack[top]
+            dx = abs(px - nodes[k, 0]) - nodes[k, 4]
+            dy = abs(py - nodes[k, 1]) - nodes[k, 5]
+            dz = abs(pz - nodes[k, 2]) - nodes[k, 6]
+            d2 = max(dx, 0.0) ** 2 + max(dy, 0.0) ** 2 + max(dz, 0.0) ** 2
+            if d2 > tol * tol:
+                continue
+            if children[k, 0] < 0:
+                for t in range(children[k, 2], children[k, 2] + children[k, 3]):
+                    dot = TN[t, 0] * N[i, 0] + TN[t, 1] * N[i, 1] + TN[t, 2] * N[i, 2]
+                    if dot >= lowest:
+                        continue
+                    if _point_triangle_dist2(px, py, pz, T, t) <= tol * tol:
+                        lowest = dot
+            else:
+                stack[top] = children[k, 0]
+                stack[top + 1] = children[k, 1]
+                top += 2
+        out[i] = np.arccos(max(-1.0, min(1.0, lowest)))
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _point_triangle_dist2(px, py, pz, T, t):
+    """Squared distance from p to triangle t (Ericson, Real-Time Collision Detection 5.1.5)."""
+    ax, ay, az = T[t, 0, 0], T[t, 0, 1], T[t, 0, 2]
+    bx, by, bz = T[t, 1, 0], T[t, 1, 1], T[t, 1, 2]
+    cx, cy, cz = T[t, 2, 0], T[t, 2, 1], T[t, 2, 2]
+    abx, aby, abz = bx - ax, by - ay, bz - az
+    acx, acy, acz = cx - ax, cy - ay, cz - az
+    apx, apy, apz = px - ax, py - ay, pz - az
+    d1 = abx * apx + aby * apy + abz * apz
+    d2 = acx * apx + acy * apy + acz * apz
+    if d1 <= 0.0 and d2 <= 0.0:
+        qx, qy, qz = ax, ay, az
+    else:
+        bpx, bpy, bpz = px - bx, py - by, pz - bz
+        d3 = abx * bpx + aby * bpy + abz * bpz
+        d4 = acx * bpx + acy * bpy + acz * bpz
+        cpx, cpy, cpz = px - cx, py - cy, pz - cz
+        d5 = abx * cpx + aby * cpy + abz * cpz
+        d6 = acx * cpx + acy * cpy + acz * cpz
+        vc = d1 * d4 - d3 * d2
+        vb = d5 * d2 - d1 * d6
+        va = d3 * d6 - d5 * d4
+        if d3 >= 0.0 and d4 <= d3:
+            qx, qy, qz = bx, by, bz
+        elif d6 >= 0.0 and d5 <= d6:
+            qx, qy, qz = cx, cy, cz
+        elif vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+            v = d1 / (d1 - d3)
+            qx, qy, qz = ax + v * abx, ay + v * aby, az + v * abz
+        elif vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+            w = d2 / (d2 - d6)
+            qx, qy, qz = ax + w * acx, ay + w * acy, az + w * acz
+        elif va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+            w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+            qx, qy, qz = bx + w * (cx - bx), by + w * (cy - by), bz + w * (cz - bz)
+        else:
+            denom = 1.0 / (va + vb + vc)
+            v = vb * denom
+            w = vc * denom
+            qx, qy, qz = ax + abx * v + acx * w, ay + aby * v + acy * w, az + abz * v + acz * w
+    return (px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2
+
+
+# -- boxes against triangles ----------------------------------------------------------------------------------------
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _axis_test(p0, p1, p2, r):
+    return min(p0, p1, p2) > r or max(p0, p1, p2) < -r
+
+
+@njit(cache=True, error_model="numpy")
+def _tri_box(v, c, e):
+    """Does the triangle v (3, 3) meet the closed axis-aligned box with centre c (3,) and half extents e (3,)?
+    (Akenine-Moeller's separating-axis test: the box's 3 axes, the triangle's normal, 9 edge cross products.)"""
+    x0, y0, z0 = v[0, 0] - c[0], v[0, 1] - c[1], v[0, 2] - c[2]
+    x1, y1, z1 = v[1, 0] - c[0], v[1, 1] - c[1], v[1, 2] - c[2]
+    x2, y2, z2 = v[2, 0] - c[0], v[2, 1] - c[1], v[2, 2] - c[2]
+    ex, ey, ez = e[0], e[1], e[2]
+    if min(x0, x1, x2) > ex or max(x0, x1, x2) < -ex:
+        return False
+    if min(y0, y1, y2) > ey or max(y0, y1, y2) < -ey:
+        return False
+    if min(z0, z1, z2) > ez or max(z0, z1, z2) < -ez:
+        return False
+    # edges
+    for k in range(3):
+        if k == 0:
+            fx, fy, fz = x1 - x0, y1 - y0, z1 - z0
+        elif k == 1:
+            fx, fy, fz = x2 - x1, y2 - y1, z2 - z1
+        else:
+            fx, fy, fz = x0 - x2, y0 - y2, z0 - z2
+        # a = ex_axis x f = (0, -fz, fy)
+        r = ey * abs(fz) + ez * abs(fy)
+        if _axis_test(-fz * y0 + fy * z0, -fz * y1 + fy * z1, -fz * y2 + fy * z2, r):
+            return False
+        # a = ey_axis x f = (fz, 0, -fx)
+        r = ex * abs(fz) + ez * abs(fx)
+        if _axis_test(fz * x0 - fx * z0, fz * x1 - fx * z1, fz * x2 - fx * z2, r):
+            return False
+        # a = ez_axis x f = (-fy, fx, 0)
+        r = ex * abs(fy) + ey * abs(fx)
+        if _axis_test(-fy * x0 + fx * y0, -fy * x1 + fx * y1, -fy * x2 + fx * y2, r):
+            return False
+    # the triangle's plane
+    nx = (y1 - y0) * (z2 - z0) - (z1 - z0) * (y2 - y0)
+    ny = (z1 - z0) * (x2 - x0) - (x1 - x0) * (z2 - z0)
+    nz = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
+    d = nx * x0 + ny * y0 + nz * z0
+    r = ex * abs(nx) + ey * abs(ny) + ez * abs(nz)
+    return abs(d) <= r
+
+
+def mesh_free_rolls(
+    tree: MeshTree,
+    midpoints: np.ndarray,
+    axes: np.ndarray,
+    widths: np.ndarray,
+    inside: np.ndarray,
+    free: np.ndarray,
+    model: CollisionModel,
+    *,
+    switch: float | None = None,
+) -> np.ndarray:
+    """The rolls of `free` (n, R) bool that stay free when the gripper's boxes (the model's fingers and palm, as
+    criterion (d) builds them) are tested against every triangle of `tree`. Returns a new (n, R) bool array."""
+    from .transforms import ROLL_REFERENCE_SWITCH
+
+    switch = ROLL_REFERENCE_SWITCH if switch is None else switch
+    free = np.ascontiguousarray(free, dtype=bool)
+    n, R = free.shape
+    out = free.copy()
+    if n == 0 or len(tree) == 0:
+        return out
+    reg = _regions(model)
+    model_f = np.array([model.finger_thickness, model.stroke, model.min_width, model.clearance, model.inner_margin])
+    psi = 2.0 * np.pi * np.arange(R) / R
+    _mesh_kernel(
+        np.ascontiguousarray(midpoints, dtype=np.float64),
+        np.ascontiguousarray(axes, dtype=np.float64),
+        np.ascontiguousarray(widths, dtype=np.float64),
+        np.ascontiguousarray(inside, dtype=np.bool_),
+        out,
+        tree.triangles,
+        tree.nodes,
+        tree.children,
+        reg,
+        model_f,
+        np.cos(psi),
+        np.sin(psi),
+        float(switch),
+    )
+    return out
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _mesh_kernel(M, A, Wd, inside, free, T, nodes, children, reg, model_f, cos_k, sin_k, switch):
+    n = M.shape[0]
+    R = cos_k.shape[0]
+    nreg = reg.shape[0]
+    chunks = (n + _CHUNK - 1) // _CHUNK
+    for ch in prange(chunks):
+        xr = np.empty((3, 2))
+        boxes_c = np.empty((3, 3))
+        boxes_e = np.empty((3, 3))
+        v = np.empty((3, 3))
+        w = np.empty((3, 3))
+        stack = np.empty(128, dtype=np.int64)
+        masks = np.empty(128, dtype=np.uint64)
+        for i in range(ch * _CHUNK, min(n, (ch + 1) * _CHUNK)):
+            todo = np.uint64(0)
+            for k in range(R):
+                if free[i, k]:
+                    todo |= np.uint64(1) << np.uint64(k)
+            if todo == 0:
+                continue
+            ax, ay, az = A[i, 0], A[i, 1], A[i, 2]
+            yx, yy, yz, zx, zy, zz = _basis(ax, ay, az, switch)
+            _x_ranges(xr, inside[i], Wd[i], model_f)
+            # the boxes in the roll's grasp frame: (centre, half extents); the palm's x extent is fixed
+            for r in range(nreg):
+                if r < 2:
+                    lo_x, hi_x = xr[r, 0], xr[r, 1]
+                else:
+                    lo_x, hi_x = -reg[r, 10], reg[r, 10]
+                boxes_c[r, 0] = 0.5 * (lo_x + hi_x)
+                boxes_e[r, 0] = 0.5 * (hi_x - lo_x)
+                boxes_c[r, 1] = 0.0
+                boxes_e[r, 1] = reg[r, 0]
+                boxes_c[r, 2] = 0.5 * (reg[r, 1] + reg[r, 2])
+                boxes_e[r, 2] = 0.5 * (reg[r, 2] - reg[r, 1])
+            blocked = np.uint64(0)
+            stack[0] = 0
+            masks[0] = todo
+            top = 1
+            while top > 0:
+                top -= 1
+                k = stack[top]
+                live = masks[top] & ~blocked
+                if live == 0:
+                    continue
+                # the node's ball in the roll-0 frame
+                qx = nodes[k, 0] - M[i, 0]
+                qy = nodes[k, 1] - M[i, 1]
+                qz = nodes[k, 2] - M[i, 2]
+                x = qx * ax + qy * ay + qz * az
+                y0 = qx * yx + qy * yy + qz * yz
+                z0 = qx * zx + qy * zy + qz * zz
+                rad = nodes[k, 3]
+                hit = np.uint64(0)
+                for rl in range(R):
+                    bit = np.uint64(1) << np.uint64(rl)
+                    if not (live & bit):
+                        continue
+                    y = y0 * cos_k[rl] + z0 * sin_k[rl]
+                    z = -y0 * sin_k[rl] + z0 * cos_k[rl]
+                    for r in range(nreg):
+                        dx = max(abs(x - boxes_c[r, 0]) - boxes_e[r, 0], 0.0)
+                        dy = max(abs(y - boxes_c[r, 1]) - boxes_e[r, 1], 0.0)
+                        dz = max(abs(z - boxes_c[r, 2]) - boxes_e[r, 2], 0.0)
+                        if dx * dx + dy * dy + dz * dz <= rad * rad:
+                            hit |= bit
+                            break
+                if hit == 0:
+                    continue
+                if children[k, 0] >= 0:
+                    stack[top] = children[k, 0]
+                    masks[top] = hit
+                    stack[top + 1] = children[k, 1]
+                    masks[top + 1] = hit
+                    top += 2
+                    continue
+                for t in range(children[k, 2], children[k, 2] + children[k, 3]):
+                    # the triangle in the roll-0 frame
+                    for c in range(3):
+                        px = T[t, c, 0] - M[i, 0]
+                        py = T[t, c, 1] - M[i, 1]
+                        pz = T[t, c, 2] - M[i, 2]
+                        v[c, 0] = px * ax + py * ay + pz * az
+                        v[c, 1] = px * yx + py * yy + pz * yz
+                        v[c, 2] = px * zx + py * zy + pz * zz
+                    for rl in range(R):
+                        bit = np.uint64(1) << np.uint64(rl)
+                        if not (hit & bit) or (blocked & bit):
+                            continue
+                        ck, sk = cos_k[rl], sin_k[rl]
+                        for c in range(3):
+                            w[c, 0] = v[c, 0]
+                            w[c, 1] = v[c, 1] * ck + v[c, 2] * sk
+                            w[c, 2] = -v[c, 1] * sk + v[c, 2] * ck
+                        for r in range(nreg):
+                            if _tri_box(w, boxes_c[r], boxes_e[r]):
+                                blocked |= bit
+                                break
+                if blocked == todo:
+                    break
+            if blocked != 0:
+                for rl in range(R):
+                    if blocked & (np.uint64(1) << np.uint64(rl)):
+                        free[i, rl] = False
