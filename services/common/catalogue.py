@@ -13,8 +13,12 @@ holding 7 can commit after one holding 8; a client that synced up to 8 would nev
 locked (`SELECT ... FOR UPDATE`) from the first number a transaction takes until it commits, so changes commit in
 sequence order and any snapshot that shows number N shows every number below it. A reader can therefore take the
 largest number it sees as its watermark. Catalogue changes are rare (seconds apart), and the lock is taken last, just
-before commit, so the serialisation costs nothing measurable. Holders of the counter lock take no other lock after it
-except catalogue rows, which only holders touch, so it cannot deadlock. SQLite serialises all writers anyway.
+before commit, so the serialisation costs nothing measurable.
+
+Lock order: object row, gripper row, counter. Inserting a pair or an event locks the object and gripper rows it
+refers to (FOR KEY SHARE, the foreign-key check), and a new object or gripper version holds its row FOR UPDATE while
+it waits for the counter; so `_hold` takes those key-share locks before the counter, and a holder of the counter
+never waits for another lock than catalogue rows, which only holders touch. SQLite serialises all writers anyway.
 """
 
 from __future__ import annotations
@@ -29,7 +33,9 @@ from .models import (
     CataloguePair,
     ChangeCounter,
     GraspSet,
+    Gripper,
     GripperVersion,
+    ObjectModel,
     ObjectVersion,
     utcnow,
 )
@@ -124,6 +130,14 @@ def _refresh_pair(session: Session, seq: ChangeSequence, pair: CataloguePair, *,
     return False
 
 
+def _hold(session: Session, object_id: int, gripper_id: int) -> None:
+    """The object's and the gripper's rows, key-share locked before the counter (module docstring: lock order)."""
+    session.execute(
+        select(ObjectModel.id).where(ObjectModel.id == object_id).with_for_update(read=True, key_share=True)
+    )
+    session.execute(select(Gripper.id).where(Gripper.id == gripper_id).with_for_update(read=True, key_share=True))
+
+
 def _pair(session: Session, seq: ChangeSequence, object_id: int, gripper_id: int) -> CataloguePair:
     pair = session.execute(
         select(CataloguePair).where(CataloguePair.object_id == object_id, CataloguePair.gripper_id == gripper_id)
@@ -140,8 +154,9 @@ def refresh(session: Session, *, object_id: int | None = None, gripper_id: int |
     """Recompute the pairs a change touched: one pair (both ids; created if new), or every pair of an object or of a
     gripper (one id). Call it last in the changing transaction: it takes the counter lock until commit. Returns how
     many pairs changed what they serve."""
-    seq = ChangeSequence(session)
     if object_id is not None and gripper_id is not None:
+        _hold(session, object_id, gripper_id)
+        seq = ChangeSequence(session)
         pairs = [_pair(session, seq, object_id, gripper_id)]
     else:
         q = select(CataloguePair)
@@ -151,6 +166,8 @@ def refresh(session: Session, *, object_id: int | None = None, gripper_id: int |
             q = q.where(CataloguePair.gripper_id == gripper_id)
         else:
             raise ValueError("refresh needs an object id, a gripper id or both")
+        # existing pairs only: their updates change no foreign key, so no further row locks
+        seq = ChangeSequence(session)
         pairs = list(session.execute(q.order_by(CataloguePair.object_id, CataloguePair.gripper_id)).scalars())
     changed = sum(_refresh_pair(session, seq, p, force=p.change_seq == 0) for p in pairs)
     seq.save()
@@ -163,11 +180,13 @@ def _state(pair: CataloguePair) -> PairState:
 
 
 def _locked_set(session: Session, grasp_set_id: int) -> tuple[GraspSet, ChangeSequence]:
-    # the counter first: every catalogue change is serialised behind it, so the pair read below is the latest
-    seq = ChangeSequence(session)
-    gs = session.get(GraspSet, grasp_set_id, populate_existing=True)
+    gs = session.get(GraspSet, grasp_set_id)
     if gs is None:
         raise CatalogueError(404, "not-found", f"no grasp set {grasp_set_id}")
+    _hold(session, gs.object_id, gs.gripper_id)
+    # then the counter: every catalogue change is serialised behind it, so what is read below is the latest
+    seq = ChangeSequence(session)
+    session.refresh(gs)
     return gs, seq
 
 

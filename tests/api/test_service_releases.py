@@ -303,3 +303,49 @@ def test_concurrent_catalogue_changes_commit_in_change_order(pg_service):
     assert result2 and result2[0].change_seq == state1.change_seq + 1
     delta, _ = sync(svc, grip, since=mark)
     assert [(i["object"], i["released"]) for i in delta] == [(one, True), (two, True)]
+
+
+def test_a_release_waits_for_a_locked_object_row_before_it_takes_the_counter(pg_service):
+    """Lock order object, gripper, counter: an upload of a new object version holds the object row FOR UPDATE and then
+    takes the counter; a release of a set of that object must wait for the object row before it takes the counter,
+    or the two would deadlock (PostgreSQL would abort one of them)."""
+    svc = pg_service
+    obj, grip = pair(svc)
+    gs = add_set(svc, obj, grip)
+    db = svc.app.state.db
+    s1 = db.sessions()
+    s1.begin()
+    s1.execute(select(ObjectModel.id).where(ObjectModel.name == obj).with_for_update())
+    result: list = []
+
+    def release() -> None:  # what POST /v1/grasp-sets/{id}/release runs
+        from services.api.crud.grasp_sets import release as crud_release
+
+        with db.sessions() as s2:
+            result.append(crud_release(s2, gs, "writer"))
+
+    t = threading.Thread(target=release)
+    t.start()
+    try:
+        with db.engine.connect() as watch:
+            for _ in range(2000):
+                n = watch.execute(
+                    text(
+                        "SELECT count(*) FROM pg_stat_activity WHERE wait_event_type = 'Lock' "
+                        "AND query LIKE '%FROM objects%FOR KEY SHARE%'"
+                    )
+                ).scalar_one()
+                if n:
+                    break
+                threading.Event().wait(0.01)
+            else:
+                raise AssertionError("the release never waited for the object row")
+        seq = catalogue.ChangeSequence(s1)  # what the upload does next: the counter is free
+        seq.take()
+        seq.save()
+        s1.commit()
+    finally:
+        s1.close()
+        t.join(30)
+    assert result and result[0]["changed"] and result[0]["released"] == gs
+    assert served(svc, obj, grip) == (200, gs, "true", "false")
