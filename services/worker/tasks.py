@@ -80,4 +80,7 @@ def run_job(self: Task, job_id: str) -> str:
     # run carries it and the job id
     request_id = getattr(req, REQUEST_ID_MESSAGE_HEADER, None) or (req.headers or {}).get(REQUEST_ID_MESSAGE_HEADER)
     with log_context(request_id=valid_request_id(request_id), job_id=str(job_id)):
-        return get_runner().run(job_id, redelivered=redelivered)
+        log.info("job %s: run (delivery %d)", job_id, req.retries + 1)
+        state = get_runner().run(job_id, redelivered=redelivered)
+        log.info("job %s: %s", job_id, state)
+        return state

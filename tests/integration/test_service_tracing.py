@@ -1,0 +1,159 @@
+"""Issue 16 (1) with real processes: `graspgen serve` on PostgreSQL and Redis and a real `graspgen worker`, both
+logging JSON lines. A job submitted with an X-Request-ID keeps that id on its row, in the API's log lines of the
+request and in every worker log line written while the job runs; the worker's own /metrics (GRASPGEN_METRICS_PORT,
+prometheus-client multiprocess mode over the prefork children) counts the job and its stages; the API's /metrics
+shows the queue depth."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+import uuid
+from pathlib import Path
+
+import httpx
+import pytest
+from services_conftest import (
+    GRIPPER,
+    PG_URL,
+    broker_settings,
+    cylinder_stl,
+    free_port,
+    redis_cleanup,
+    settings_env,
+    slug,
+    stop_process,
+    unique_name,
+    wait_for_log,
+    wait_http,
+    write_tokens_file,
+)
+
+pytestmark = [pytest.mark.integration, pytest.mark.slow]
+
+RID = "trace-" + uuid.uuid4().hex[:12]
+
+
+def _json_lines(path: Path) -> list[dict]:
+    lines = [line for line in path.read_text(errors="replace").splitlines() if line.strip()]
+    out = []
+    for line in lines:
+        if line.startswith("{"):
+            out.append(json.loads(line))  # a line that starts as JSON must be one whole JSON object
+    return out
+
+
+def _sample(text: str, prefix: str) -> float:
+    for line in text.splitlines():
+        if line.startswith(prefix):
+            return float(line.rsplit(" ", 1)[1])
+    return 0.0
+
+
+@pytest.fixture()
+def stack(pg_schema, tmp_path):
+    tokens = write_tokens_file(tmp_path / "tokens.json")
+    broker = broker_settings()
+    values = dict(
+        database_url=PG_URL,
+        database_schema=pg_schema,
+        storage_dir=tmp_path / "var",
+        tokens_file=tmp_path / "tokens.json",
+        log_format="json",
+        progress_interval_s=0.1,
+        **broker,
+    )
+    metrics_port = free_port()
+    worker_log, api_log = tmp_path / "worker.log", tmp_path / "api.log"
+    with open(worker_log, "wb") as out:
+        worker = subprocess.Popen(
+            [
+                str(Path(sys.executable).with_name("graspgen")),
+                "worker",
+                "--concurrency",
+                "1",
+                "--hostname",
+                f"{unique_name('w')}@%h",
+            ],
+            env=settings_env(**values, metrics_port=metrics_port, metrics_dir=tmp_path / "metrics"),
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
+    port = free_port()
+    with open(api_log, "wb") as out:
+        api = subprocess.Popen(
+            [str(Path(sys.executable).with_name("graspgen")), "serve", "--port", str(port)],
+            env=settings_env(**values),
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
+    try:
+        wait_for_log(worker_log, " ready.", worker)
+        wait_for_log(api_log, "Uvicorn running", api)
+        wait_http(f"http://127.0.0.1:{port}/healthz")
+        yield f"http://127.0.0.1:{port}", f"http://127.0.0.1:{metrics_port}/metrics", tokens, api_log, worker_log
+    finally:
+        stop_process(api)
+        stop_process(worker)
+        redis_cleanup(broker["broker_key_prefix"])
+
+
+def test_request_id_follows_the_job_into_the_worker_and_metrics_count_it(stack, pg_schema):
+    url, worker_metrics, tokens, api_log, worker_log = stack
+    w = {"Authorization": f"Bearer {tokens['writer']}"}
+    obj, grip = slug("trace"), slug("grip")
+    with httpx.Client(base_url=url, timeout=60) as c:
+        up = c.post(
+            "/v1/objects", headers=w, files={"file": ("p.stl", cylinder_stl())}, data={"name": obj, "units": "mm"}
+        )
+        assert up.status_code == 201, up.text
+        assert c.post("/v1/grippers", headers=w, json={**GRIPPER, "name": grip}).status_code == 201
+        r = c.post(
+            "/v1/jobs",
+            headers={**w, "X-Request-ID": RID},
+            json={"object": obj, "gripper": grip, "params": {"points": 600, "k1": 4, "k2": 2}},
+        )
+        assert r.status_code == 202 and r.headers["x-request-id"] == RID
+        job_id = r.json()["id"]
+        end = time.monotonic() + 180
+        while (state := c.get(f"/v1/jobs/{job_id}", headers=w).json()["state"]) not in ("succeeded", "failed"):
+            assert time.monotonic() < end, state
+            time.sleep(0.2)
+        assert state == "succeeded"
+        api_metrics = c.get("/metrics", headers={"Authorization": f"Bearer {tokens['admin']}"}).text
+    assert "graspgen_queue_depth " in api_metrics
+    assert _sample(api_metrics, 'graspgen_http_request_duration_seconds_count{method="POST",route="/v1/jobs"') >= 1
+
+    # the job row keeps the id of the request that made it
+    from services.common.db import Database
+    from services.common.models import Job
+    from services.common.settings import Settings
+
+    db = Database(Settings(database_url=PG_URL, database_schema=pg_schema))
+    try:
+        with db.session() as s:
+            assert s.get(Job, uuid.UUID(job_id)).request_id == RID
+    finally:
+        db.dispose()
+
+    # the API's lines of that request carry it (uvicorn's access line among them), and all lines are JSON
+    api_lines = _json_lines(api_log)
+    assert api_lines and all({"time", "level", "logger", "message"} <= set(d) for d in api_lines)
+    mine = [d for d in api_lines if d["request_id"] == RID]
+    assert any("POST /v1/jobs" in d["message"] for d in mine), mine
+
+    # every worker line written while the job ran carries the request id and the job id
+    time.sleep(0.5)  # the last line is flushed
+    job_lines = [d for d in _json_lines(worker_log) if d.get("job_id") == job_id]
+    assert len(job_lines) >= 2, _json_lines(worker_log)[-20:]
+    assert all(d["request_id"] == RID for d in job_lines)
+    assert any(d["message"] == f"job {job_id}: succeeded" for d in job_lines)
+
+    # the worker's own metrics, summed over its prefork children
+    text = httpx.get(worker_metrics, timeout=10).text
+    assert _sample(text, 'graspgen_jobs_finished_total{kind="generate",state="succeeded"}') >= 1
+    assert _sample(text, 'graspgen_job_stage_duration_seconds_count{kind="generate",stage="collision"}') >= 1
+    assert _sample(text, 'graspgen_job_duration_seconds_count{kind="generate",state="succeeded"}') >= 1
+    assert "graspgen_queue_depth " in text
