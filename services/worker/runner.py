@@ -39,7 +39,7 @@ from services.common.models import (
 from services.common.settings import Settings
 from services.common.storage import Storage, StorageError, StoredBlob, make_storage
 
-__all__ = ["JobRunner", "STAGE_WEIGHTS", "QUALITY_KWARGS", "stage_weights"]
+__all__ = ["JobRunner", "STAGE_WEIGHTS", "QUALITY_KWARGS", "HOLD_KWARGS", "stage_weights"]
 
 log = logging.getLogger(__name__)
 
@@ -59,7 +59,11 @@ STAGE_WEIGHTS: dict[str, dict[str, float]] = {
 }
 
 #: job params passed to graspgen.generate / recluster as keyword arguments, not through graspgen.Params
-QUALITY_KWARGS = ("validate", "select", "density")
+QUALITY_KWARGS = ("validate", "select")
+#: criterion (e) and the contact tolerance: graspgen.Params fields, passed by name (a job stored before they existed
+#: has none of them and runs with the core's defaults); recluster takes the mass for validation only
+HOLD_KWARGS = ("mass_kg", "density", "accel", "hold", "position_tolerance")
+RECLUSTER_HOLD_KWARGS = ("mass_kg", "density")
 
 
 def stage_weights(kind: str, validate: bool) -> dict[str, float]:
@@ -71,8 +75,8 @@ def stage_weights(kind: str, validate: bool) -> dict[str, float]:
     return {k: w / total for k, w in weights.items()}
 
 
-def _quality_kwargs(params: dict[str, Any]) -> dict[str, Any]:
-    return {k: params[k] for k in QUALITY_KWARGS if params.get(k) is not None}
+def _kwargs(params: dict[str, Any], names: tuple[str, ...]) -> dict[str, Any]:
+    return {k: params[k] for k in names if params.get(k) is not None}
 
 
 class _TimeLimitError(Exception):
@@ -270,7 +274,7 @@ class JobRunner:
             rec.log("job", rr.TextDocument(self._metadata_markdown(inp), media_type=rr.MediaType.MARKDOWN), static=True)
             progress("load", 0.0)
             p = inp.params
-            quality = _quality_kwargs(p)
+            quality = _kwargs(p, QUALITY_KWARGS)
             part = tmp / f"part.{inp.object_format}"  # the format is a whitelisted token, never a user path
             if inp.kind == "generate":
                 self.storage.download(inp.object_file_key, part)
@@ -293,6 +297,7 @@ class JobRunner:
                     object_name=inp.object_name,
                     object_version=inp.object_version,
                     **quality,
+                    **_kwargs(p, HOLD_KWARGS),
                 )
             elif inp.kind == "cluster":
                 assert inp.source_candidates_key and inp.source_export_key
@@ -311,6 +316,7 @@ class JobRunner:
                     recording=rec,
                     progress=progress,
                     **quality,
+                    **_kwargs(p, RECLUSTER_HOLD_KWARGS),
                 )
             else:
                 raise ValueError(f"unknown job kind {inp.kind!r}")

@@ -20,7 +20,7 @@ QUALITY = {"validate": True, "select": "best-near-medoid", "points": 600, "k1": 
 def pair(pg_service):
     obj, grip = slug("part"), slug("grip")
     assert pg_service.upload(obj).status_code == 201
-    assert pg_service.gripper(grip).status_code == 201
+    assert pg_service.gripper(grip, grip_force=20.0).status_code == 201  # validation needs the grip force
     return obj, grip
 
 
