@@ -59,15 +59,16 @@ PLANE_TOLERANCE = 1e-9
 class PickIndex:
     """Every (candidate, free roll) pair of a candidate set, in the set's quality order (object frame).
 
-    `frames` (k, 12) holds each pair's grasp axes X, Y, Z and origin P (object frame, metres) side by side, so that
-    one product `frames @ M` gives every dot product a query needs.
+    `frames` (12, k) holds each pair's grasp axes X, Y, Z and origin P (object frame, metres) as rows of components
+    (rows 0-2 the x, y, z of X, rows 3-5 of Y, 6-8 of Z, 9-11 of P): every dot product a query needs is three
+    multiply-adds over contiguous rows, with no BLAS call (whose threads only contend on a busy host).
     """
 
     gripper: GripperSpec
     candidate: np.ndarray  # (k,) int64, index into the candidate NPZ
     roll_index: np.ndarray  # (k,) int16, index into roll_angles_rad
     roll_angles_rad: np.ndarray  # (R,)
-    frames: np.ndarray  # (k, 12) float64
+    frames: np.ndarray  # (12, k) float64
     width: np.ndarray  # (k,) contact distance, metres
     score: np.ndarray  # (k,) non-increasing
     labels: np.ndarray  # (n, 2) int32 per candidate
@@ -95,11 +96,11 @@ class PickIndex:
         y0, z0 = roll_basis(axes)  # per candidate; the pairs combine them with their roll
         psi = np.asarray(candidates.roll_angles_rad, dtype=np.float64)[ri][:, None]
         c, s = np.cos(psi), np.sin(psi)
-        frames = np.empty((len(ci), 12), dtype=np.float64)
-        frames[:, 0:3] = axes[ci]
-        frames[:, 3:6] = c * y0[ci] + s * z0[ci]
-        frames[:, 6:9] = -s * y0[ci] + c * z0[ci]
-        frames[:, 9:12] = candidates.midpoints[ci]
+        frames = np.empty((12, len(ci)), dtype=np.float64)
+        frames[0:3] = axes[ci].T
+        frames[3:6] = (c * y0[ci] + s * z0[ci]).T
+        frames[6:9] = (-s * y0[ci] + c * z0[ci]).T
+        frames[9:12] = candidates.midpoints[ci].T
         n = len(candidates)
         medoid = np.zeros(n, dtype=bool)
         medoid[np.asarray(candidates.medoids, dtype=np.int64)] = True
@@ -276,9 +277,7 @@ class PickQuery:
             self.pregrasp_distance,
         )
         chosen = _best(index, ok, cos_z, self.limit)
-        grasps = [
-            _grasp_out(index, i, float(cos_z[i]), T_wo, self.pregrasp_distance, self.T_tcp_flange) for i in chosen
-        ]
+        grasps = _grasps_out(index, chosen, cos_z, T_wo, self.pregrasp_distance, self.T_tcp_flange)
         return PickResult(
             considered=len(index),
             feasible=int(np.count_nonzero(ok)),
@@ -330,6 +329,14 @@ def _index_of(source: Any, gripper: GripperSpec | None) -> PickIndex:
     raise InvalidParameterError(f"cannot pick from a {type(source).__name__}", field="grasp_set")
 
 
+def _dot(rows: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """rows (3, k) . v (3,) -> (k,), as multiply-adds (no BLAS)."""
+    out = rows[0] * v[0]
+    out += rows[1] * v[1]
+    out += rows[2] * v[2]
+    return out
+
+
 def _filter(
     index: PickIndex,
     R_wo: np.ndarray,
@@ -340,41 +347,53 @@ def _filter(
     offsets: np.ndarray,
     distance: float,
 ) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
-    """Feasibility mask (k,), cos of the approach angle (k,) and how many pairs each filter removed."""
+    """Feasibility mask (k,), cos of the approach angle (k,) and how many pairs each filter removed.
+
+    The cone first, over every pair (the object-frame direction against each Z); the planes only over the pairs
+    inside the cone, which a typical approach cone keeps a small share of."""
     k, P = len(index), len(normals)
-    # object-frame query vectors: column 0 the approach direction, then per plane its normal in each of the 4 blocks
-    # (X, Y, Z, P), so (frames @ M) gives Z.d and per plane (X.n, Y.n, Z.n, P.n)
-    M = np.zeros((12, 1 + 4 * P))
+    F = index.frames
     if direction is not None:
-        M[6:9, 0] = R_wo.T @ direction
-    n_obj = normals @ R_wo  # (P, 3) = (R_wo^T n_j)
-    for j in range(P):
-        for b in range(4):
-            M[3 * b : 3 * b + 3, 1 + 4 * j + b] = n_obj[j]
-    G = index.frames @ M
-    cos_z = np.clip(G[:, 0], -1.0, 1.0) if direction is not None else np.ones(k)
-    ok = cos_z >= cos_max - 1e-12 if direction is not None else np.ones(k, dtype=bool)
-    removed_cone = k - int(np.count_nonzero(ok))
-    cone_ok = ok.copy()
+        cos_z = _dot(F[6:9], R_wo.T @ direction)
+        ok = cos_z >= cos_max - 1e-12
+        inside_cone = np.flatnonzero(ok)
+    else:
+        cos_z, ok, inside_cone = np.ones(k), np.ones(k, dtype=bool), None
+    n_cone = k if inside_cone is None else len(inside_cone)
+    removed_cone = k - n_cone
+    if P == 0 or n_cone == 0:
+        return ok, cos_z, {"approach": removed_cone, "planes": 0, "per_plane": [0] * P}
+    sub = F if inside_cone is None else F[:, inside_cone]
     g = index.gripper
     ft, fw, fd = g.finger_thickness, g.finger_width, g.finger_depth
-    open_w = np.minimum(index.width + g.pregrasp_clearance, g.stroke)
-    per_plane = []
+    width = index.width if inside_cone is None else index.width[inside_cone]
+    grasp_reach = width / 2 + ft  # outer face of a finger at the grasp, along X
+    open_reach = np.minimum(width + g.pregrasp_clearance, g.stroke) / 2 + ft  # and at the pre-grasp
+    clear = np.ones(n_cone, dtype=bool)
+    per_plane: list[int] = []
     for j in range(P):
-        mx, my, mz, pn = (np.abs(G[:, 1 + 4 * j]), np.abs(G[:, 2 + 4 * j]), G[:, 3 + 4 * j], G[:, 4 + 4 * j])
+        n_obj = R_wo.T @ normals[j]  # the plane normal in the object frame; m = (X.n, Y.n, Z.n) in the grasp frame
+        mx, my, mz = np.abs(_dot(sub[0:3], n_obj)), np.abs(_dot(sub[3:6], n_obj)), _dot(sub[6:9], n_obj)
         amz = np.abs(mz)
-        h0 = pn + normals[j] @ t_wo - offsets[j]  # the grasp origin's height above the plane
-        # both fingers' lowest corner: -|mx| (w/2 + thickness) - |my| fw/2 - |mz| fd/2 below the origin
+        h0 = _dot(sub[9:12], n_obj)
+        h0 += normals[j] @ t_wo - offsets[j]  # the grasp origin's height above the plane
+        h_pre = h0 - distance * mz  # the pre-grasp origin's
+        # a box's lowest corner lies sum_i |m_i| h_i below its centre (h: half extents); for both fingers that is
+        # |mx| (reach) + |my| fw/2 + |mz| fd/2 below the origin
         side = my * (fw / 2) + amz * (fd / 2)
-        lowest = np.minimum(h0 - mx * (index.width / 2 + ft), h0 - distance * mz - mx * (open_w / 2 + ft)) - side
+        lowest = np.minimum(h0 - mx * grasp_reach, h_pre - mx * open_reach) - side
         if g.palm_depth > 0:
             zc = -fd / 2 - g.palm_depth / 2
             palm = mz * zc - mx * (g.stroke / 2 + ft) - my * (g.palm_width / 2) - amz * (g.palm_depth / 2)
-            lowest = np.minimum(lowest, np.minimum(h0, h0 - distance * mz) + palm)
+            lowest = np.minimum(lowest, np.minimum(h0, h_pre) + palm)
         inside = lowest >= -PLANE_TOLERANCE
-        per_plane.append(int(np.count_nonzero(cone_ok & ~inside)))
-        ok &= inside
-    removed = {"approach": removed_cone, "planes": int(np.count_nonzero(cone_ok & ~ok)), "per_plane": per_plane}
+        per_plane.append(n_cone - int(np.count_nonzero(inside)))
+        clear &= inside
+    if inside_cone is None:
+        ok = clear
+    else:
+        ok[inside_cone[~clear]] = False
+    removed = {"approach": removed_cone, "planes": n_cone - int(np.count_nonzero(clear)), "per_plane": per_plane}
     return ok, cos_z, removed
 
 
@@ -390,40 +409,43 @@ def _best(index: PickIndex, ok: np.ndarray, cos_z: np.ndarray, limit: int) -> np
     return idx[order[:limit]]
 
 
-def _matrix(T: np.ndarray) -> list[list[float]]:
-    return [[float(v) for v in row] for row in T]
-
-
-def _grasp_out(
-    index: PickIndex, i: int, cos_z: float, T_wo: np.ndarray, distance: float, T_tf: np.ndarray | None
-) -> dict[str, Any]:
-    f = index.frames[i]
-    T_og = np.eye(4)
-    T_og[:3, 0], T_og[:3, 1], T_og[:3, 2], T_og[:3, 3] = f[0:3], f[3:6], f[6:9], f[9:12]
+def _grasps_out(
+    index: PickIndex, chosen: np.ndarray, cos_z: np.ndarray, T_wo: np.ndarray, distance: float, T_tf: np.ndarray | None
+) -> list[dict[str, Any]]:
+    """The chosen pairs as response dicts, the poses computed for all of them at once."""
+    m = len(chosen)
+    if m == 0:
+        return []
+    f = index.frames[:, chosen]
+    T_og = np.zeros((m, 4, 4))
+    T_og[:, :3, 0], T_og[:, :3, 1], T_og[:, :3, 2], T_og[:, :3, 3] = f[0:3].T, f[3:6].T, f[6:9].T, f[9:12].T
+    T_og[:, 3, 3] = 1.0
     T_wg = T_wo @ T_og
     T_wp = T_wg.copy()
-    T_wp[:3, 3] -= distance * T_wg[:3, 2]
-    c = int(index.candidate[i])
-    width = float(index.width[i])
-    out: dict[str, Any] = {
-        "T_world_grasp": _matrix(T_wg),
-        "position": [float(v) for v in T_wg[:3, 3]],
-        "quaternion_xyzw": [float(v) for v in matrix_to_quaternion_xyzw(T_wg[:3, :3])],
-        "T_world_pregrasp": _matrix(T_wp),
-        "width": width,
-        "open_width": float(index.gripper.open_width(width)),
-        "roll_deg": float(np.degrees(index.roll_angles_rad[index.roll_index[i]])),
-        "roll_index": int(index.roll_index[i]),
-        "approach_angle_deg": float(np.degrees(np.arccos(np.clip(cos_z, -1.0, 1.0)))),
-        "candidate": c,
-        "cluster": [int(index.labels[c, 0]), int(index.labels[c, 1])],
-        "medoid": bool(index.medoid[c]),
-        "score": float(index.score[i]),
-        "friction_margin_deg": float(index.friction_margin_deg[c]),
+    T_wp[:, :3, 3] -= distance * T_wg[:, :3, 2]
+    cand = index.candidate[chosen]
+    width = index.width[chosen]
+    g = index.gripper
+    columns: dict[str, list[Any]] = {
+        "T_world_grasp": T_wg.tolist(),
+        "position": T_wg[:, :3, 3].tolist(),
+        "quaternion_xyzw": [matrix_to_quaternion_xyzw(R).tolist() for R in T_wg[:, :3, :3]],
+        "T_world_pregrasp": T_wp.tolist(),
+        "width": width.tolist(),
+        "open_width": np.minimum(width + g.pregrasp_clearance, g.stroke).tolist(),
+        "roll_deg": np.degrees(index.roll_angles_rad[index.roll_index[chosen]]).tolist(),
+        "roll_index": index.roll_index[chosen].tolist(),
+        "approach_angle_deg": np.degrees(np.arccos(np.clip(cos_z[chosen], -1.0, 1.0))).tolist(),
+        "candidate": cand.tolist(),
+        "cluster": index.labels[cand].tolist(),
+        "medoid": index.medoid[cand].tolist(),
+        "score": index.score[chosen].tolist(),
+        "friction_margin_deg": index.friction_margin_deg[cand].tolist(),
     }
     if index.hold_margin is not None:
-        out["hold_margin"] = float(index.hold_margin[c])
+        columns["hold_margin"] = index.hold_margin[cand].tolist()
     if T_tf is not None:
-        out["T_world_flange"] = _matrix(T_wg @ T_tf)
-        out["T_world_preflange"] = _matrix(T_wp @ T_tf)
-    return out
+        columns["T_world_flange"] = (T_wg @ T_tf).tolist()
+        columns["T_world_preflange"] = (T_wp @ T_tf).tolist()
+    names = list(columns)
+    return [dict(zip(names, row, strict=True)) for row in zip(*columns.values(), strict=True)]
