@@ -117,13 +117,22 @@ def test_convex_decomposition_keeps_the_hole_that_the_hull_fills(monkeypatch):
 
 def test_generate_validates_every_exported_grasp():
     gs = graspgen.generate(
-        trimesh.creation.box(extents=(0.04, 0.03, 0.02)), GRIPPER, units="m", points=1200, k1=3, k2=2, validate=True
+        trimesh.creation.box(extents=(0.04, 0.03, 0.02)),
+        GRIPPER,
+        units="m",
+        points=1200,
+        k1=3,
+        k2=2,
+        validate=True,
+        mass_kg=0.2,
     )
     v = gs.stats["validation"]
     assert v["tested"] == len(gs.grasps) == 6
     assert v["succeeded"] == sum(g["sim"]["success"] for g in gs.grasps)
     assert v["succeeded"] >= 5
     assert v["part"]["geometry"] == "convex" and v["engine"].startswith("mujoco")
+    # the simulation used the job's mass and the gripper's force, not a steel / 20 N guess
+    assert v["part"]["mass_kg"] == pytest.approx(0.2) and v["part"]["grip_force_n"] == 20.0
     assert set(gs.grasps[0]["sim"]) == {"success", "reason", "slip_mm", "rotation_deg"}
     assert "validate" in gs.stats["timings_s"]
 
@@ -145,7 +154,7 @@ def test_failed_medoids_are_repaired_from_their_own_cluster(monkeypatch):
         ]
 
     monkeypatch.setattr(physics, "simulate_grasps", fake)
-    gs = graspgen.generate(box, GRIPPER, units="m", points=1200, k1=3, k2=2, validate=True, repair_limit=2)
+    gs = graspgen.generate(box, GRIPPER, units="m", points=1200, k1=3, k2=2, validate=True, mass_kg=0.2, repair_limit=2)
     v = gs.stats["validation"]
     assert v["first_pass"]["succeeded"] == 0 and v["succeeded"] == 6 and v["repaired"] == 6
     c = gs.candidates
@@ -163,7 +172,7 @@ def test_repair_gives_up_after_the_limit(monkeypatch):
         return [physics.SimResult(False, "dropped", 30.0, 0.0, 0) for _ in keys]
 
     monkeypatch.setattr(physics, "simulate_grasps", fail)
-    gs = graspgen.generate(box, GRIPPER, units="m", points=1200, k1=3, k2=2, validate=True, repair_limit=3)
+    gs = graspgen.generate(box, GRIPPER, units="m", points=1200, k1=3, k2=2, validate=True, mass_kg=0.2, repair_limit=3)
     v = gs.stats["validation"]
     assert v["succeeded"] == 0 and v["repaired"] == 0 and v["simulated"] == 6 * 4
     assert all("medoid" not in g and g["sim"]["reason"] == "dropped" for g in gs.grasps)
@@ -176,7 +185,9 @@ def test_recording_holds_the_validation_outcome_and_coverage(tmp_path):
     from pathlib import Path
 
     box = trimesh.creation.box(extents=(0.04, 0.03, 0.02))
-    graspgen.generate(box, GRIPPER, units="m", points=800, k1=2, k2=1, validate=True, recording=tmp_path / "r.rrd")
+    graspgen.generate(
+        box, GRIPPER, units="m", points=800, k1=2, k2=1, validate=True, mass_kg=0.2, recording=tmp_path / "r.rrd"
+    )
     rerun = shutil.which("rerun", path=str(Path(sys.executable).parent))
     assert rerun, "the rerun CLI ships with rerun-sdk"
     r = subprocess.run(
@@ -206,15 +217,15 @@ def test_inside_grasp_opens_onto_a_bore():
 
 def test_validation_of_an_empty_set_and_of_a_recluster(tmp_path):
     big = graspgen.generate(
-        trimesh.creation.box(extents=(0.1, 0.1, 0.1)), GRIPPER, units="m", points=600, validate=True
+        trimesh.creation.box(extents=(0.1, 0.1, 0.1)), GRIPPER, units="m", points=600, validate=True, mass_kg=0.2
     )
     assert big.grasps == [] and big.stats["validation"]["tested"] == 0
     box = trimesh.creation.box(extents=(0.04, 0.03, 0.02))
     gs = graspgen.generate(box, GRIPPER, units="m", points=1000, k1=2, k2=2)
     gs.save_candidates(tmp_path / "c.npz")
     with pytest.raises(graspgen.InvalidParameterError, match="need the part"):
-        graspgen.recluster(tmp_path / "c.npz", gs.to_json(), k1=2, k2=1, validate=True)
-    again = graspgen.recluster(tmp_path / "c.npz", gs.to_json(), k1=2, k2=1, validate=True, mesh=box)
+        graspgen.recluster(tmp_path / "c.npz", gs.to_json(), k1=2, k2=1, validate=True, mass_kg=0.2)
+    again = graspgen.recluster(tmp_path / "c.npz", gs.to_json(), k1=2, k2=1, validate=True, mass_kg=0.2, mesh=box)
     assert again.stats["validation"]["tested"] == len(again.grasps) == 2
     assert all("sim" in g for g in again.grasps)
 
@@ -223,7 +234,9 @@ def test_validated_export_is_byte_identical_for_a_seed():
     box = trimesh.creation.box(extents=(0.04, 0.03, 0.02))
 
     def run():
-        gs = graspgen.generate(box, GRIPPER, units="m", points=800, k1=2, k2=2, validate=True, seed=3, sim_workers=2)
+        gs = graspgen.generate(
+            box, GRIPPER, units="m", points=800, k1=2, k2=2, validate=True, mass_kg=0.2, seed=3, sim_workers=2
+        )
         gs.stats["timings_s"] = {}
         return gs.to_json_bytes()
 
@@ -358,7 +371,7 @@ def test_gravity_across_the_closing_axis_turns_a_part_that_gravity_along_it_does
     """A 200 mm tall 0.5 kg bar held 88 mm above its centre of mass, top-down: the pick (+Z) puts no moment on it;
     turned so that gravity runs along the closing axis (+-X) the moment is about an axis in the pads' plane, carried
     by the pads' pressure; across (+-Y) it is about the closing axis, carried by torsional friction only. The half turn
-    to -Z (the part standing on the gripper) is about the closing axis and passes through +Y, so it fails too."""
+    to -Z (the part standing on the gripper) is about the closing axis and passes through -Y, so it fails too."""
     tall = physics.prepare_part(trimesh.creation.box(extents=(0.03, 0.03, 0.2)), SPEC, mass_kg=0.5)
     T = _pose([0, 0, 0.088], [1, 0, 0])
     out = physics.simulate_perturbed(
@@ -385,3 +398,12 @@ def test_simulate_perturbed_matches_one_by_one_and_keeps_the_placement_error(box
             assert grid[i][j] == one
     assert physics.simulate_grasps(box_sim, poses, widths, seed=3, keys=[5, 9]) == [row[0] for row in grid]
     assert grid[0][0] != grid[0][2]  # the turn moves the part a little on its pads
+
+
+def test_generate_refuses_validation_without_mass_or_grip_force():
+    box = trimesh.creation.box(extents=(0.04, 0.03, 0.02))
+    with pytest.raises(graspgen.InvalidParameterError, match="mass"):
+        graspgen.generate(box, GRIPPER, units="m", points=300, k1=2, k2=1, validate=True)
+    forceless = {k: v for k, v in GRIPPER.items() if k != "grip_force"}
+    with pytest.raises(graspgen.InvalidParameterError, match="grip_force"):
+        graspgen.generate(box, forceless, units="m", points=300, k1=2, k2=1, validate=True, mass_kg=0.2)
