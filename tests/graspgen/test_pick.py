@@ -224,13 +224,17 @@ def test_pregrasp_alone_can_block_a_grasp():
 
 @pytest.mark.slow
 def test_a_grasp_set_picks_with_its_own_gripper():
+    """A real set from generate(): the same answer as the brute-force loop, with the set's own gripper."""
     part = example_part("ring-screw")
-    gs = graspgen.generate(part.mesh, GRIPPER, units="m", points=600, k1=4, k2=2, rolls=8)
-    r = graspgen.pick(gs, np.eye(4), approach={"direction": [0, 0, -1], "max_angle_deg": 60}, limit=1000)
+    gs = graspgen.generate(part.mesh, GRIPPER, units="m", points=1500, k1=4, k2=2, rolls=8)
+    T = _turned()
+    planes = [{"point": [0, 0, 0.03], "normal": [0, 0, 1]}]
+    r = graspgen.pick(gs, T, approach={"direction": [0, 0, -1], "max_angle_deg": 90}, planes=planes, limit=1000)
+    want, feasible, cone_out, planes_out = brute_force(gs.candidates, gs.gripper, T, [0, 0, -1], 90, planes, 0.05, 1000)
     assert r.considered == int(gs.candidates.free_rolls.sum()) > 0
-    assert 0 < len(r.grasps) <= 1000 and r.feasible >= len(r.grasps)
-    assert all(g["approach_angle_deg"] <= 60 + 1e-9 for g in r.grasps)
-    assert [g["score"] for g in r.grasps] == sorted((g["score"] for g in r.grasps), reverse=True)
+    assert (r.feasible, r.removed["approach"], r.removed["planes"]) == (feasible, cone_out, planes_out)
+    assert [(g["candidate"], g["roll_index"]) for g in r.grasps] == [(c, k) for c, k, _, _ in want]
+    assert r.score_source == ("quality" if gs.candidates.quality_terms is not None else "friction_margin_deg")
 
 
 @pytest.mark.parametrize(
