@@ -291,8 +291,8 @@ def markdown(rows, members, args, wall_s) -> str:
         "### Per part",
         "",
         "| part | gripper | configuration | candidates | grasps | nominal | all members | mean share | cov | "
-        "generate | validation (held / tested, repaired) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "generate | validation (held / tested, repaired) | nominal failures |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         for config in args.configs:
@@ -307,7 +307,9 @@ def markdown(rows, members, args, wall_s) -> str:
                 f"| {r['part']} | {r['gripper']} | {config} | {v['candidates']:,} | {k} | "
                 f"{pct(v.get('nominal', 0), k)} | {pct(v.get('all', 0), k)} | "
                 f"{'-' if not k else f'{100 * v.get(MEAN, 0.0):.1f} %'} | "
-                f"{'-' if cov is None else f'{100 * cov:.1f} %'} | {v['generate_s']:.1f} s | {vtxt} |"
+                f"{'-' if cov is None else f'{100 * cov:.1f} %'} | {v['generate_s']:.1f} s | {vtxt} | "
+                + (", ".join(f"{why} {n}" for why, n in v.get("nominal_reasons", {}).items() if n) or "-")
+                + " |"
             )
     lines += [
         "",
@@ -400,12 +402,14 @@ def main() -> None:
     ap.add_argument("--configs", nargs="*", default=list(CONFIGS), choices=CONFIGS)
     ap.add_argument("--out", default=str(ROOT / "docs" / "benchmarks_quality.md"))
     ap.add_argument("--json", help="also write the raw rows here")
+    ap.add_argument("--render", help="only write the markdown of the rows (--json) of an earlier run")
+    ap.add_argument("--wall", type=float, default=None, help="with --render: the earlier run's wall time (s)")
     args = ap.parse_args()
     members = physics.perturbation_set(0)
     earlier = {r["part"]: r for r in json.loads(Path(args.merge).read_text())} if args.merge else {}
     rows = []
     t_all = time.perf_counter()
-    for label, part in parts(args.parts):
+    for label, part in [] if args.render else parts(args.parts):
         t0 = time.perf_counter()
         row = run_part(label, part, args, members)
         old = earlier.pop(label, None)
@@ -420,8 +424,10 @@ def main() -> None:
         if args.json:
             Path(args.json).write_text(json.dumps(rows, indent=1, default=str))
     rows += list(earlier.values())
+    if args.render:
+        rows = json.loads(Path(args.render).read_text())
     args.configs = [c for c in CONFIGS if any(c in r["configs"] for r in rows)]
-    block = markdown(rows, members, args, time.perf_counter() - t_all)
+    block = markdown(rows, members, args, args.wall or time.perf_counter() - t_all)
     if args.out:
         write_block(Path(args.out), block)
     print(block)
