@@ -77,6 +77,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--units", required=True, choices=("mm", "cm", "m", "in"), help="the length unit of the mesh")
     r.add_argument("--out", required=True, help="PNG to write")
     r.add_argument("--size", default="800x600", help="WIDTHxHEIGHT in pixels (default 800x600)")
+    w = sub.add_parser("warmup", help="compile every numba kernel into numba's on-disk cache (no cold start)")
+    w.add_argument("--quiet", action="store_true", help="print nothing but errors")
     for name in ("serve", "worker", "migrate"):
         sub.add_parser(name, help=f"service: {name} (see docs/SERVICE.md)", add_help=False)
     return parser
@@ -98,6 +100,8 @@ def main(argv: list[str] | None = None) -> int:
             return _generate(args)
         if args.command == "render":
             return _render(args)
+        if args.command == "warmup":
+            return _warmup(args)
         return _demo(args)
     except GraspgenError as exc:
         print(f"graspgen: error: {exc.message}", file=sys.stderr)
@@ -173,6 +177,22 @@ def _render(args: argparse.Namespace) -> int:
         mesh = part.mesh
     write_atomic(args.out, render_grasp_set(mesh, export, size=size))
     print(f"wrote {args.out} ({size[0]}x{size[1]}, {len(export['grasps'])} grasps)")
+    return 0
+
+
+def _warmup(args: argparse.Namespace) -> int:
+    from .warmup import warmup
+
+    def say(step: str) -> None:
+        if not args.quiet:
+            print(f"warmup: {step}", file=sys.stderr, flush=True)
+
+    res = warmup(log=say)
+    if not args.quiet:
+        print(
+            f"kernels compiled and cached in {res['cache_dir']} ({res['index_files']} index files), "
+            f"{res['seconds']:.1f} s"
+        )
     return 0
 
 

@@ -279,3 +279,13 @@ def test_index_frames_equal_the_contract_frames():
     np.testing.assert_allclose(index.frames[6:9].T, T[:, :3, 2], atol=1e-15)
     np.testing.assert_allclose(index.frames[9:12].T, T[:, :3, 3], atol=1e-15)
     assert np.all(np.diff(index.score) <= 0) and index.nbytes > index.frames.nbytes
+
+
+def test_hold_margins_of_the_set_come_with_the_grasps():
+    from dataclasses import replace
+
+    cands = synthetic(n=30)
+    margins = np.linspace(1.0, 4.0, len(cands))
+    r = graspgen.pick(replace(cands, hold_margin=margins), np.eye(4), limit=5, gripper=GRIPPER)
+    assert [g["hold_margin"] for g in r.grasps] == [margins[g["candidate"]] for g in r.grasps]
+    assert "hold_margin" not in graspgen.pick(cands, np.eye(4), limit=1, gripper=GRIPPER).grasps[0]
