@@ -13,3 +13,13 @@ if [ "$(cat .venv/.setup-stamp 2>/dev/null)" != "$stamp" ]; then
   .venv/bin/python -m pip install -q --disable-pip-version-check -c constraints.txt -e '.[dev]'
   echo "$stamp" > .venv/.setup-stamp
 fi
+# numba's kernels compiled into its on-disk cache (graspgen/__pycache__, or NUMBA_CACHE_DIR) whenever graspgen's
+# sources or the dependencies changed, so the first job after set-up does not compile them (1-2 min cold)
+wstamp=$(cat graspgen/*.py .venv/.setup-stamp | sha256sum | cut -d' ' -f1)
+if [ "$(cat .venv/.warmup-stamp 2>/dev/null)" != "$wstamp" ]; then
+  if .venv/bin/graspgen warmup --quiet; then
+    echo "$wstamp" > .venv/.warmup-stamp
+  else
+    echo "setup: graspgen warmup failed; kernels will compile on first use" >&2
+  fi
+fi

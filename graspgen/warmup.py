@@ -1,0 +1,93 @@
+"""Compile every numba kernel into numba's on-disk cache before the first real job (issue 16.5, no cold start).
+
+After a fresh install the first `generate()` compiles about thirty kernels (50-90 s on the project's machines);
+every kernel is declared with `cache=True`, so once compiled it is loaded from disk by any later process. `warmup()`
+runs the code paths that production runs, on small inputs, so that each kernel is compiled with the argument types
+it will see: `generate()` on a mesh in both collision modes, inside grasps, quality selection, the hold criterion
+(when this version of graspgen has it), a point cloud without normals (normal estimation), re-clustering, the
+renderer and the memory probe. `graspgen warmup` (scripts/setup.sh, services/Dockerfile) calls it.
+
+Where the cache lives: `NUMBA_CACHE_DIR` when set, otherwise `__pycache__` beside each module. The cache is valid
+for this CPU and these sources (numba checks both), so build it on the machine, or the image, that runs the jobs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import trimesh
+
+__all__ = ["warmup", "cache_dir"]
+
+
+def cache_dir() -> Path:
+    """Where numba writes this package's cache files."""
+    env = os.environ.get("NUMBA_CACHE_DIR")
+    return Path(env) if env else Path(__file__).resolve().parent / "__pycache__"
+
+
+def _cache_files(root: Path) -> int:
+    return sum(1 for _ in root.rglob("*.nbi")) if root.is_dir() else 0
+
+
+def warmup(*, log: Any = None) -> dict[str, Any]:
+    """Run every kernel once on small inputs; returns {"seconds", "cache_dir", "index_files", "steps"}.
+
+    `log(message)` is called before each step.
+    """
+    from .examples import EXAMPLE_GRIPPER, example_part
+    from .gripper import GripperSpec
+    from .memory import probe
+    from .parts import load_part
+    from .pipeline import generate, recluster
+    from .render import render_grasp_set
+
+    say = log or (lambda message: None)
+    t_all = time.perf_counter()
+    steps: list[tuple[str, float]] = []
+
+    def step(name: str, fn: Any) -> Any:
+        say(name)
+        t0 = time.perf_counter()
+        out = fn()
+        steps.append((name, time.perf_counter() - t0))
+        return out
+
+    part = example_part("ring-screw")
+    small = {"points": 600, "k1": 3, "k2": 2}
+    gs = step("generate, swept", lambda: generate(part, EXAMPLE_GRIPPER, **small))
+    step("generate, paper, inside", lambda: generate(part, EXAMPLE_GRIPPER, collision="paper", inside=True, **small))
+    step("generate, best-near-medoid", lambda: generate(part, EXAMPLE_GRIPPER, select="best-near-medoid", **small))
+    # criterion (e) hold, where this version of graspgen has it
+    has_force = "grip_force" in {f.name for f in dataclasses.fields(GripperSpec)}
+    if has_force and "mass_kg" in inspect.signature(generate).parameters:
+        gripper = {**EXAMPLE_GRIPPER, "grip_force": 20.0}  # hold is off without a grip force
+        step("generate, hold", lambda: generate(part, gripper, mass_kg=0.2, **small))
+    rng = np.random.default_rng(0)
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.02)
+    cloud, _ = trimesh.sample.sample_surface_even(sphere, 800, seed=rng)
+    step("point cloud", lambda: generate(load_part(_npz(cloud), units="m", file_type="npz"), EXAMPLE_GRIPPER, **small))
+    step("recluster", lambda: recluster(gs.candidates, gs.to_json(), k1=2, k2=2, select="best-near-medoid", mesh=part))
+    step("render", lambda: render_grasp_set(part.mesh, gs.to_json(), size=(64, 48)))
+    step("memory probe", lambda: probe(part, EXAMPLE_GRIPPER))
+    root = cache_dir()
+    return {
+        "seconds": time.perf_counter() - t_all,
+        "cache_dir": str(root),
+        "index_files": _cache_files(root),
+        "steps": steps,
+    }
+
+
+def _npz(points: np.ndarray) -> bytes:
+    import io
+
+    buf = io.BytesIO()
+    np.savez(buf, points=points)
+    return buf.getvalue()

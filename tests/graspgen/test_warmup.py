@@ -1,0 +1,60 @@
+"""No cold start (issue 16.5): `graspgen warmup` fills numba's on-disk cache, and a later job compiles nothing."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+GRAPSGEN = str(Path(sys.executable).with_name("graspgen"))
+#: modules whose kernels a generate job, a re-cluster or a preview runs
+MODULES = ("antipodal", "collision", "clustering", "sampling", "quality", "coverage", "render", "parts")
+
+pytestmark = pytest.mark.slow  # compiles every kernel from scratch (a minute or two)
+
+
+def _cache_files(root: Path) -> dict[str, float]:
+    return {str(p.relative_to(root)): p.stat().st_mtime for p in root.rglob("*") if p.suffix in (".nbi", ".nbc")}
+
+
+def test_warmup_fills_an_empty_cache_and_a_job_afterwards_compiles_nothing(tmp_path):
+    cache = tmp_path / "numba-cache"
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
+    run = subprocess.run([GRAPSGEN, "warmup"], env=env, capture_output=True, text=True, timeout=900, cwd=ROOT)
+    assert run.returncode == 0, run.stderr
+    assert str(cache) in run.stdout and "index files" in run.stdout
+    files = _cache_files(cache)
+    for module in MODULES:
+        assert any(Path(f).name.startswith(f"{module}.") and f.endswith(".nbi") for f in files), module
+    assert sum(f.endswith(".nbc") for f in files) >= 25
+
+    # a real job on another part, in a new process: every kernel comes from the cache, none is compiled again
+    out = tmp_path / "grasps.json"
+    job = subprocess.run(
+        [
+            GRAPSGEN,
+            "generate",
+            str(ROOT / "tests" / "reliability" / "corpus" / "meshes" / "good_box_mm.stl"),
+            "--units",
+            "mm",
+            "--gripper",
+            str(ROOT / "examples" / "pgn-80.json"),
+            "--points",
+            "1500",
+            "--out",
+            str(out),
+            "--quiet",
+        ],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=ROOT,
+    )
+    assert job.returncode == 0, job.stderr
+    assert out.is_file()
+    assert _cache_files(cache) == files  # no new or rewritten cache file: nothing was compiled
