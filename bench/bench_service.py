@@ -186,6 +186,7 @@ def seed_catalogue(stack: Stack, n: int, export: dict) -> list[str]:
     """n objects with one grasp set each for one gripper, written directly (rows plus export blobs)."""
     from sqlalchemy import insert, select
 
+    from services.common import catalogue
     from services.common.db import Database
     from services.common.jobs import canonical_json, params_key
     from services.common.models import GraspSet, Gripper, GripperVersion, ObjectModel, ObjectVersion
@@ -240,6 +241,7 @@ def seed_catalogue(stack: Stack, n: int, export: dict) -> list[str]:
                     )
                 ],
             )
+            catalogue.refresh(s, object_id=o.id, gripper_id=g.id)  # as the worker does when it stores a set
     db.dispose()
     return names
 
