@@ -17,8 +17,9 @@ before commit, so the serialisation costs nothing measurable.
 
 Lock order: object row, gripper row, counter. Inserting a pair or an event locks the object and gripper rows it
 refers to (FOR KEY SHARE, the foreign-key check), and a new object or gripper version holds its row FOR UPDATE while
-it waits for the counter; so `_hold` takes those key-share locks before the counter, and a holder of the counter
-never waits for another lock than catalogue rows, which only holders touch. SQLite serialises all writers anyway.
+it waits for the counter; so `_hold` takes those key-share locks before the counter. A holder of the counter then
+waits only for catalogue rows, which only holders touch, and (the worker's result) for a bulk parent's job row, whose
+holders never wait for the counter. SQLite serialises all writers anyway.
 """
 
 from __future__ import annotations
