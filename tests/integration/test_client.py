@@ -120,7 +120,8 @@ def stack(request):
 def test_plant_flow_through_the_client(stack, tmp_path):
     url, token = stack
     obj, grip = slug("ring"), slug("pgn")
-    with Client(url, token, cache_dir=tmp_path / "cache") as gg:
+    # a long read timeout: the first submission of a process may compile the memory probe (tens of seconds here)
+    with Client(url, token, cache_dir=tmp_path / "cache", timeout=300) as gg:
         up = gg.upload_object(cylinder_stl(), name=obj, units="mm", filename="ring.stl")
         assert up["version"] == 1
         assert gg.upload_object(cylinder_stl(), name=obj, units="mm", filename="ring.stl")["version"] == 1
