@@ -12,7 +12,7 @@ import argparse
 import logging
 import sys
 
-__all__ = ["main", "build_parser", "COMMANDS"]
+__all__ = ["main", "build_parser", "app_factory", "COMMANDS"]
 
 COMMANDS = ("serve", "worker", "migrate")
 
@@ -123,11 +123,23 @@ def _serve(args: argparse.Namespace) -> int:
     )
     _metrics_server(settings, app.state.dispatcher if workers == 1 else None)
     if workers > 1:
-        # each process builds its own app from the same environment
-        uvicorn.run("services.api.app:create_app", factory=True, workers=workers, **options)
+        # each process builds its own app from the same environment; importing it (numba, trimesh, mujoco) took 9 s
+        # on a busy 2-core host, past uvicorn's 5 s start-up health check, which then killed the children in a loop
+        options["timeout_worker_healthcheck"] = 120
+        uvicorn.run("services.cli:app_factory", factory=True, workers=workers, **options)
     else:
         uvicorn.run(app, **options)
     return 0
+
+
+def app_factory():  # type: ignore[no-untyped-def]
+    """The app of one `serve --workers N` process: a spawned interpreter, so it sets up its own logging first."""
+    from services.api.app import create_app
+    from services.common.settings import get_settings
+
+    settings = get_settings()
+    _logging(settings.log_level, settings.log_format)
+    return create_app(settings)
 
 
 def _worker(args: argparse.Namespace) -> int:

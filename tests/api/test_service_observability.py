@@ -182,3 +182,20 @@ def test_the_request_id_is_stored_on_the_job_it_submitted(pg_service):
         assert [c.request_id for c in children] == [bulk.headers["x-request-id"]]
     for jid in (r.json()["id"], bulk.json()["id"]):
         pg_service.post(f"/v1/jobs/{jid}/cancel")
+
+
+def test_an_unhandled_error_is_a_500_problem_with_the_request_id_and_counted(pg_service):
+    from fastapi.testclient import TestClient
+
+    def boom() -> None:
+        raise RuntimeError("an internal failure")
+
+    app = pg_service.app
+    if not any(getattr(r, "path", None) == "/__boom" for r in app.router.routes):
+        app.add_api_route("/__boom", boom, include_in_schema=False)
+    client = TestClient(app, raise_server_exceptions=False)  # the app's lifespan is pg_service's
+    r = client.get("/__boom", headers={"X-Request-ID": "rid-500"})
+    assert r.status_code == 500 and r.headers["content-type"] == PROBLEM
+    assert r.headers["x-request-id"] == "rid-500"
+    text = pg_service.get("/metrics", who="admin").text
+    assert metric(text, "graspgen_http_request_duration_seconds_count", route="/__boom", status="500") >= 1

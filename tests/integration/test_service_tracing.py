@@ -157,3 +157,99 @@ def test_request_id_follows_the_job_into_the_worker_and_metrics_count_it(stack, 
     assert _sample(text, 'graspgen_job_stage_duration_seconds_count{kind="generate",stage="collision"}') >= 1
     assert _sample(text, 'graspgen_job_duration_seconds_count{kind="generate",state="succeeded"}') >= 1
     assert "graspgen_queue_depth " in text
+
+
+def test_embedded_jobs_carry_the_request_id_into_their_log_lines(tmp_path):
+    """The embedded pool runs the same task in the API process; the id travels with it the same way."""
+    tokens = write_tokens_file(tmp_path / "tokens.json")
+    port = free_port()
+    log = tmp_path / "serve.log"
+    with open(log, "wb") as out:
+        proc = subprocess.Popen(
+            [str(Path(sys.executable).with_name("graspgen")), "serve", "--port", str(port)],
+            env=settings_env(storage_dir=tmp_path / "var", tokens_file=tmp_path / "tokens.json", log_format="json"),
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
+    try:
+        wait_for_log(log, "Uvicorn running", proc)
+        url = f"http://127.0.0.1:{port}"
+        wait_http(url + "/healthz")
+        w = {"Authorization": f"Bearer {tokens['writer']}"}
+        with httpx.Client(base_url=url, timeout=60) as c:
+            up = c.post(
+                "/v1/objects", headers=w, files={"file": ("p.stl", cylinder_stl())}, data={"name": "p", "units": "mm"}
+            )
+            assert up.status_code == 201
+            assert c.post("/v1/grippers", headers=w, json=GRIPPER).status_code == 201
+            rid = "embedded-" + uuid.uuid4().hex[:8]
+            r = c.post(
+                "/v1/jobs",
+                headers={**w, "X-Request-ID": rid},
+                json={"object": "p", "gripper": GRIPPER["name"], "params": {"points": 600, "k1": 4, "k2": 2}},
+            )
+            job_id = r.json()["id"]
+            end = time.monotonic() + 180
+            while c.get(f"/v1/jobs/{job_id}", headers=w).json()["state"] not in ("succeeded", "failed"):
+                assert time.monotonic() < end
+                time.sleep(0.2)
+        time.sleep(0.3)
+        job_lines = [d for d in _json_lines(log) if d.get("job_id") == job_id]
+        assert any(d["message"] == f"job {job_id}: succeeded" for d in job_lines), job_lines
+        assert all(d["request_id"] == rid for d in job_lines)
+        # lines of other requests (the polls) carry their own ids, not this one
+        polls = [d for d in _json_lines(log) if f"GET /v1/jobs/{job_id}" in d["message"]]
+        assert polls and all(d["request_id"] not in (None, rid) for d in polls)
+    finally:
+        stop_process(proc)
+
+
+def test_serve_with_two_processes_reports_the_sum_of_both(pg_schema, tmp_path):
+    """`serve --workers 2`: prometheus-client's multiprocess mode, so /metrics (from whichever process answers) and the
+    metrics port count the requests of both processes."""
+    tokens = write_tokens_file(tmp_path / "tokens.json")
+    broker = broker_settings()
+    port, metrics_port = free_port(), free_port()
+    log = tmp_path / "serve.log"
+    values = dict(
+        database_url=PG_URL,
+        database_schema=pg_schema,
+        storage_dir=tmp_path / "var",
+        tokens_file=tmp_path / "tokens.json",
+        metrics_port=metrics_port,
+        metrics_dir=tmp_path / "metrics",
+        log_format="json",
+        **broker,
+    )
+    with open(log, "wb") as out:
+        proc = subprocess.Popen(
+            [str(Path(sys.executable).with_name("graspgen")), "serve", "--port", str(port), "--workers", "2"],
+            env=settings_env(**values),
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
+    try:
+        wait_for_log(log, "Uvicorn running", proc)
+        url = f"http://127.0.0.1:{port}"
+        wait_http(url + "/healthz")
+        answered: set[int] = set()
+        end = time.monotonic() + 60
+        n = 0
+        while len(answered) < 2:  # until both processes have answered (each logs its own access lines)
+            assert time.monotonic() < end, "one process answered everything"
+            with httpx.Client(base_url=url, timeout=10) as c:  # a new connection: either process may take it
+                c.get("/healthz", headers={"X-Request-ID": f"probe-{n}"})
+                n += 1
+            time.sleep(0.05)
+            answered = {d["process"] for d in _json_lines(log) if (d["request_id"] or "").startswith("probe-")}
+        prefix = 'graspgen_http_request_duration_seconds_count{method="GET",route="/healthz",status="200"}'
+        text = httpx.get(f"http://127.0.0.1:{metrics_port}/metrics", timeout=10).text
+        assert _sample(text, prefix) >= n  # (wait_http's own probes come on top)
+        admin = {"Authorization": f"Bearer {tokens['admin']}"}
+        assert _sample(httpx.get(url + "/metrics", headers=admin, timeout=10).text, prefix) >= n
+        # both processes log their requests (each set up its own JSON logging), each line with its request id
+        access = [d for d in _json_lines(log) if "GET /healthz" in d["message"]]
+        assert all(d["request_id"] for d in access)
+    finally:
+        stop_process(proc)
+        redis_cleanup(broker["broker_key_prefix"])
