@@ -21,6 +21,7 @@ from services.common.metrics import CONTENT_TYPE_LATEST, HTTP_DURATION, QueueDep
 
 from .deps import AdminDep
 from .problems import ApiError
+from .routers import problems
 
 __all__ = ["RequestContextMiddleware", "TokenBuckets", "router", "install"]
 
@@ -112,7 +113,7 @@ router = APIRouter(tags=["health"])
     "and final state, stage durations, queue depth, export cache hits, previews, rate-limited requests. "
     "`GRASPGEN_METRICS_PORT` offers the same without a token on a separate port.",
     response_class=Response,
-    responses={200: {"content": {CONTENT_TYPE_LATEST: {"schema": {"type": "string"}}}}},
+    responses={200: {"content": {CONTENT_TYPE_LATEST: {"schema": {"type": "string"}}}}, **problems()},
 )
 def get_metrics(request: Request, principal: AdminDep) -> Response:
     return Response(render(request.app.state.metrics_registry), media_type=CONTENT_TYPE_LATEST)

@@ -14,15 +14,16 @@ _DESCRIPTIONS = {
     409: "Conflict with the resource's state",
     413: "Request body larger than the configured limit",
     422: "Invalid input",
+    429: "This token is over its request rate (only with GRASPGEN_RATE_LIMIT_PER_S set); retry after Retry-After",
     503: "A dependency (database, broker or artifact storage) is unavailable or lost an artifact; retry later",
 }
 
 
 def problems(*codes: int) -> dict[int | str, dict[str, Any]]:
-    """OpenAPI entries for the problem+json responses a route can give: 401 and 403 are on every protected route, and
-    503 too (every one reads the database; some read artifacts from storage)."""
+    """OpenAPI entries for the problem+json responses a route can give: 401, 403 and 429 (per-token rate limits, when
+    on) are on every protected route, and 503 too (every one reads the database; some read artifacts from storage)."""
     out: dict[int | str, dict[str, Any]] = {}
-    for code in (401, 403, *codes, 503):
+    for code in (401, 403, 429, *codes, 503):
         if code == 304:
             out[code] = {"description": _DESCRIPTIONS[304]}
             continue
