@@ -193,6 +193,10 @@ def test_embedded_jobs_carry_the_request_id_into_their_log_lines(tmp_path):
             while c.get(f"/v1/jobs/{job_id}", headers=w).json()["state"] not in ("succeeded", "failed"):
                 assert time.monotonic() < end
                 time.sleep(0.2)
+            # the embedded queue depth is the in-process pool's: nothing waits once the job is done
+            text = c.get("/metrics", headers={"Authorization": f"Bearer {tokens['admin']}"}).text
+            assert _sample(text, "graspgen_queue_depth ") == 0.0 and "graspgen_queue_depth 0.0" in text
+            assert _sample(text, 'graspgen_jobs_finished_total{kind="generate",state="succeeded"}') == 1.0
         time.sleep(0.3)
         job_lines = [d for d in _json_lines(log) if d.get("job_id") == job_id]
         assert any(d["message"] == f"job {job_id}: succeeded" for d in job_lines), job_lines
