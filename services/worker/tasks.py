@@ -79,8 +79,25 @@ def run_job(self: Task, job_id: str) -> str:
     # the submitting request's id travels as a message header (services/worker/dispatch.py): every log line of the
     # run carries it and the job id
     request_id = getattr(req, REQUEST_ID_MESSAGE_HEADER, None) or (req.headers or {}).get(REQUEST_ID_MESSAGE_HEADER)
+    if request_id is None:  # a message the reconciler sent again, or one sent before request ids existed
+        request_id = _stored_request_id(job_id)
     with log_context(request_id=valid_request_id(request_id), job_id=str(job_id)):
         log.info("job %s: run (delivery %d)", job_id, req.retries + 1)
         state = get_runner().run(job_id, redelivered=redelivered)
         log.info("job %s: %s", job_id, state)
         return state
+
+
+def _stored_request_id(job_id: str) -> str | None:
+    """The request id kept on the job's row (one small read; only for messages that came without one)."""
+    import uuid
+
+    from sqlalchemy import select
+
+    from services.common.models import Job
+
+    try:
+        with get_runner().db.read_sessions() as s:
+            return s.execute(select(Job.request_id).where(Job.id == uuid.UUID(str(job_id)))).scalar_one_or_none()
+    except Exception:  # the run itself reports a bad id or an unreachable database
+        return None
