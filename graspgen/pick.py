@@ -59,18 +59,22 @@ PLANE_TOLERANCE = 1e-9
 class PickIndex:
     """Every (candidate, free roll) pair of a candidate set, in the set's quality order (object frame).
 
-    `frames` (12, k) holds each pair's grasp axes X, Y, Z and origin P (object frame, metres) as rows of components
-    (rows 0-2 the x, y, z of X, rows 3-5 of Y, 6-8 of Z, 9-11 of P): every dot product a query needs is three
-    multiply-adds over contiguous rows, with no BLAS call (whose threads only contend on a busy host).
+    `frames` (k, 12) holds each pair's grasp axes X, Y, Z and origin P (object frame, metres) side by side, so that
+    gathering the pairs inside a cone reads whole cache lines; `approach` (3, k) repeats the Z axes in float32 as
+    contiguous component rows: the cone test over every pair is three multiply-adds over 12 bytes a pair (and no
+    BLAS call, whose threads only contend on a busy host), with a slack that float32 cannot exceed; the pairs it
+    keeps are then tested exactly in float64.
     """
 
     gripper: GripperSpec
     candidate: np.ndarray  # (k,) int64, index into the candidate NPZ
     roll_index: np.ndarray  # (k,) int16, index into roll_angles_rad
     roll_angles_rad: np.ndarray  # (R,)
-    frames: np.ndarray  # (12, k) float64
+    frames: np.ndarray  # (k, 12) float64
+    approach: np.ndarray  # (3, k) float32, the Z axes (a conservative prefilter)
     width: np.ndarray  # (k,) contact distance, metres
-    score: np.ndarray  # (k,) non-increasing
+    score: np.ndarray  # (k,)
+    rank: np.ndarray  # (k,) int64, position in the quality order (score, candidate, roll)
     labels: np.ndarray  # (n, 2) int32 per candidate
     medoid: np.ndarray  # (n,) bool per candidate: an exported representative
     friction_margin_deg: np.ndarray  # (n,)
@@ -90,17 +94,25 @@ class PickIndex:
             per_candidate = np.asarray(candidates.friction_margin_deg, dtype=np.float64)
             source = "friction_margin_deg"
         score = per_candidate[ci]
-        order = np.lexsort((ri, ci, -score))
-        ci, ri, score = ci[order].astype(np.int64), ri[order].astype(np.int16), score[order]
+        rank = np.empty(len(ci), dtype=np.int64)
+        rank[np.lexsort((ri, ci, -score))] = np.arange(len(ci))  # position in the quality order
         axes = candidates.axes
         y0, z0 = roll_basis(axes)  # per candidate; the pairs combine them with their roll
         psi = np.asarray(candidates.roll_angles_rad, dtype=np.float64)[ri][:, None]
         c, s = np.cos(psi), np.sin(psi)
-        frames = np.empty((12, len(ci)), dtype=np.float64)
-        frames[0:3] = axes[ci].T
-        frames[3:6] = (c * y0[ci] + s * z0[ci]).T
-        frames[6:9] = (-s * y0[ci] + c * z0[ci]).T
-        frames[9:12] = candidates.midpoints[ci].T
+        y = c * y0[ci] + s * z0[ci]
+        z = -s * y0[ci] + c * z0[ci]
+        # stored by approach direction (a 32 x 64 grid over cos(polar) and azimuth), so that the pairs inside a cone
+        # lie in runs and gathering them reads memory in order; in the quality order within a cell
+        polar = np.clip(((z[:, 2] + 1) * 16).astype(np.int64), 0, 31)
+        azimuth = ((np.arctan2(z[:, 1], z[:, 0]) + np.pi) * (64 / (2 * np.pi))).astype(np.int64) % 64
+        order = np.lexsort((rank, polar * 64 + azimuth))
+        frames = np.empty((len(ci), 12), dtype=np.float64)
+        frames[:, 0:3] = axes[ci[order]]
+        frames[:, 3:6] = y[order]
+        frames[:, 6:9] = z[order]
+        frames[:, 9:12] = candidates.midpoints[ci[order]]
+        ci, ri, score, rank = ci[order].astype(np.int64), ri[order].astype(np.int16), score[order], rank[order]
         n = len(candidates)
         medoid = np.zeros(n, dtype=bool)
         medoid[np.asarray(candidates.medoids, dtype=np.int64)] = True
@@ -111,8 +123,10 @@ class PickIndex:
             roll_index=ri,
             roll_angles_rad=np.asarray(candidates.roll_angles_rad, dtype=np.float64),
             frames=frames,
+            approach=np.ascontiguousarray(frames[:, 6:9].T, dtype=np.float32),
             width=candidates.widths[ci],
             score=score,
+            rank=rank,
             labels=np.asarray(candidates.labels, dtype=np.int32),
             medoid=medoid,
             friction_margin_deg=np.asarray(candidates.friction_margin_deg, dtype=np.float64),
@@ -126,9 +140,10 @@ class PickIndex:
 
     @property
     def nbytes(self) -> int:
-        arrays = (self.candidate, self.roll_index, self.frames, self.width, self.score, self.labels, self.medoid)
+        arrays = (self.candidate, self.roll_index, self.frames, self.approach, self.width, self.score, self.rank)
         extra = 0 if self.hold_margin is None else self.hold_margin.nbytes
-        return sum(a.nbytes for a in arrays) + self.friction_margin_deg.nbytes + extra + 1024
+        per_candidate = self.labels.nbytes + self.medoid.nbytes + self.friction_margin_deg.nbytes + extra
+        return sum(a.nbytes for a in arrays) + per_candidate + 1024
 
 
 @dataclass(frozen=True)
@@ -329,6 +344,10 @@ def _index_of(source: Any, gripper: GripperSpec | None) -> PickIndex:
     raise InvalidParameterError(f"cannot pick from a {type(source).__name__}", field="grasp_set")
 
 
+#: float32 dot products of unit vectors stay within ~1e-6 of the float64 ones; the prefilter keeps this much more
+_PREFILTER_SLACK = 1e-5
+
+
 def _dot(rows: np.ndarray, v: np.ndarray) -> np.ndarray:
     """rows (3, k) . v (3,) -> (k,), as multiply-adds (no BLAS)."""
     out = rows[0] * v[0]
@@ -352,18 +371,26 @@ def _filter(
     The cone first, over every pair (the object-frame direction against each Z); the planes only over the pairs
     inside the cone, which a typical approach cone keeps a small share of."""
     k, P = len(index), len(normals)
-    F = index.frames
     if direction is not None:
-        cos_z = _dot(F[6:9], R_wo.T @ direction)
-        ok = cos_z >= cos_max - 1e-12
-        inside_cone = np.flatnonzero(ok)
+        d_obj = R_wo.T @ direction
+        rough = _dot(index.approach, d_obj.astype(np.float32))  # float32: within 1e-6 of the exact cosine
+        maybe = np.flatnonzero(rough >= cos_max - _PREFILTER_SLACK)
+        near = index.frames[maybe]
+        exact = _dot(near.T[6:9], d_obj)
+        keep = exact >= cos_max - 1e-12
+        inside_cone = maybe[keep]
+        cos_z = rough.astype(np.float64)
+        cos_z[maybe] = exact
+        ok = np.zeros(k, dtype=bool)
+        ok[inside_cone] = True
+        near = near[keep]
     else:
-        cos_z, ok, inside_cone = np.ones(k), np.ones(k, dtype=bool), None
+        cos_z, ok, inside_cone, near = np.ones(k), np.ones(k, dtype=bool), None, index.frames
     n_cone = k if inside_cone is None else len(inside_cone)
     removed_cone = k - n_cone
     if P == 0 or n_cone == 0:
         return ok, cos_z, {"approach": removed_cone, "planes": 0, "per_plane": [0] * P}
-    sub = F if inside_cone is None else F[:, inside_cone]
+    sub = near.T  # (12, k') view
     g = index.gripper
     ft, fw, fd = g.finger_thickness, g.finger_width, g.finger_depth
     width = index.width if inside_cone is None else index.width[inside_cone]
@@ -398,13 +425,13 @@ def _filter(
 
 
 def _best(index: PickIndex, ok: np.ndarray, cos_z: np.ndarray, limit: int) -> np.ndarray:
-    """Up to `limit` feasible pairs: by score (pairs are stored in score order), then approach angle, candidate,
-    roll. Only the feasible pairs scoring at least the limit-th one's score are sorted."""
+    """Up to `limit` feasible pairs: by score, then approach angle, candidate, roll. Only the feasible pairs scoring
+    at least the limit-th one's score (in the quality order, found by a partition of the ranks) are sorted."""
     idx = np.flatnonzero(ok)
     if len(idx) > limit:
+        kth = idx[np.argpartition(index.rank[idx], limit - 1)[limit - 1]]
         s = index.score[idx]
-        cut = s[limit - 1]
-        idx = idx[: int(np.searchsorted(-s, -cut, side="right"))]
+        idx = idx[s >= index.score[kth]]
     order = np.lexsort((index.roll_index[idx], index.candidate[idx], -cos_z[idx], -index.score[idx]))
     return idx[order[:limit]]
 
@@ -416,7 +443,7 @@ def _grasps_out(
     m = len(chosen)
     if m == 0:
         return []
-    f = index.frames[:, chosen]
+    f = index.frames[chosen].T
     T_og = np.zeros((m, 4, 4))
     T_og[:, :3, 0], T_og[:, :3, 1], T_og[:, :3, 2], T_og[:, :3, 3] = f[0:3].T, f[3:6].T, f[6:9].T, f[9:12].T
     T_og[:, 3, 3] = 1.0

@@ -274,11 +274,14 @@ def test_index_frames_equal_the_contract_frames():
     T = grasp_frames(
         cands.midpoints[index.candidate], cands.axes[index.candidate], cands.roll_angles_rad[index.roll_index]
     )
-    np.testing.assert_allclose(index.frames[0:3].T, T[:, :3, 0], atol=1e-15)
-    np.testing.assert_allclose(index.frames[3:6].T, T[:, :3, 1], atol=1e-15)
-    np.testing.assert_allclose(index.frames[6:9].T, T[:, :3, 2], atol=1e-15)
-    np.testing.assert_allclose(index.frames[9:12].T, T[:, :3, 3], atol=1e-15)
-    assert np.all(np.diff(index.score) <= 0) and index.nbytes > index.frames.nbytes
+    np.testing.assert_allclose(index.frames[:, 0:3], T[:, :3, 0], atol=1e-15)
+    np.testing.assert_allclose(index.frames[:, 3:6], T[:, :3, 1], atol=1e-15)
+    np.testing.assert_allclose(index.frames[:, 6:9], T[:, :3, 2], atol=1e-15)
+    np.testing.assert_allclose(index.frames[:, 9:12], T[:, :3, 3], atol=1e-15)
+    np.testing.assert_array_equal(index.approach, index.frames[:, 6:9].T.astype(np.float32))
+    in_order = np.argsort(index.rank)
+    assert sorted(index.rank) == list(range(len(index))) and np.all(np.diff(index.score[in_order]) <= 0)
+    assert index.nbytes > index.frames.nbytes
 
 
 def test_hold_margins_of_the_set_come_with_the_grasps():
