@@ -345,6 +345,7 @@ class GraspSetSummary(BaseModel):
     sha256: str = Field(description="sha256 of the export bytes (the strong ETag without quotes)")
     etag: str
     created_at: datetime
+    withdrawn_at: datetime | None = Field(None, description="set when withdrawn: the catalogue never serves it")
     links: dict[str, str]
 
 

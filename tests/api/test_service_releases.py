@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import threading
+import time
 import uuid
 
 import pytest
@@ -111,6 +112,8 @@ def test_release_pins_a_set_until_withdrawn_and_history_records_who_and_when(svc
     gone = svc.get(f"/v1/catalogue/{obj}/{grip}?version=1")
     assert gone.status_code == 404 and gone.json()["code"] == "withdrawn"
     assert svc.get(f"/v1/grasp-sets/{a}").status_code == 200  # the archive keeps it
+    listed = {i["id"]: i for i in svc.get(f"/v1/grasp-sets?object={obj}&gripper={grip}").json()["items"]}
+    assert listed[a]["withdrawn_at"] is not None and listed[b]["withdrawn_at"] is None
     again = svc.post(f"/v1/grasp-sets/{a}/withdraw")
     assert again.status_code == 200 and again.json()["changed"] is False
 
@@ -281,7 +284,8 @@ def test_concurrent_catalogue_changes_commit_in_change_order(pg_service):
     t.start()
     try:
         with db.engine.connect() as watch:
-            for _ in range(2000):
+            deadline = time.monotonic() + 120  # a condition awaited, not a speed: generous for a loaded machine
+            while time.monotonic() < deadline:
                 waiting = (
                     pid2
                     and watch.execute(
@@ -316,30 +320,47 @@ def test_a_release_waits_for_a_locked_object_row_before_it_takes_the_counter(pg_
     s1 = db.sessions()
     s1.begin()
     s1.execute(select(ObjectModel.id).where(ObjectModel.name == obj).with_for_update())
+    pid1 = s1.execute(text("SELECT pg_backend_pid()")).scalar_one()
     result: list = []
+    pid2: list[int] = []
 
     def release() -> None:  # what POST /v1/grasp-sets/{id}/release runs
         from services.api.crud.grasp_sets import release as crud_release
 
-        with db.sessions() as s2:
-            result.append(crud_release(s2, gs, "writer"))
+        try:
+            with db.sessions() as s2:
+                pid2.append(s2.execute(text("SELECT pg_backend_pid()")).scalar_one())
+                result.append(crud_release(s2, gs, "writer"))
+        except BaseException as exc:  # reported below
+            result.append(exc)
 
     t = threading.Thread(target=release)
     t.start()
     try:
         with db.engine.connect() as watch:
-            for _ in range(2000):
-                n = watch.execute(
-                    text(
-                        "SELECT count(*) FROM pg_stat_activity WHERE wait_event_type = 'Lock' "
-                        "AND query LIKE '%FROM objects%FOR KEY SHARE%'"
-                    )
-                ).scalar_one()
+            deadline = time.monotonic() + 120  # a condition awaited, not a speed: generous for a loaded machine
+            while time.monotonic() < deadline:
+                # blocked by transaction 1 (the object row); pg_stat_activity's query text is not reliable for
+                # prepared statements, the blocking pids are
+                n = (
+                    pid2
+                    and watch.execute(
+                        text("SELECT :p1 = ANY(pg_blocking_pids(:p2))"), {"p1": pid1, "p2": pid2[0]}
+                    ).scalar_one()
+                )
                 if n:
                     break
                 threading.Event().wait(0.01)
             else:
-                raise AssertionError("the release never waited for the object row")
+                raise AssertionError(f"the release never waited for the object row: {result}")
+            held = watch.execute(
+                text(
+                    "SELECT count(*) FROM pg_locks l JOIN pg_class c ON c.oid = l.relation "
+                    "WHERE l.pid = :p AND c.relname = 'change_counter'"
+                ),
+                {"p": pid2[0]},
+            ).scalar_one()
+            assert held == 0  # it waits without having touched the counter
         seq = catalogue.ChangeSequence(s1)  # what the upload does next: the counter is free
         seq.take()
         seq.save()

@@ -90,6 +90,7 @@ def summary_select() -> Select:
             GraspSet.grasp_count,
             GraspSet.export_sha256,
             GraspSet.created_at,
+            GraspSet.withdrawn_at,
             ObjectModel.name.label("object"),
             ObjectVersion.version.label("object_version"),
             Gripper.name.label("gripper"),
@@ -118,6 +119,7 @@ def summary_out(row: Any) -> dict[str, Any]:
         "sha256": row.export_sha256,
         "etag": etag_of(row.export_sha256),
         "created_at": row.created_at,
+        "withdrawn_at": row.withdrawn_at,
         "links": {
             "self": base,
             "candidates": base + "/candidates",
