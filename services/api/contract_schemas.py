@@ -83,21 +83,26 @@ class JobParams(BaseModel):
             ]
         },
     )
-    points: int | None = Field(None, ge=100, le=1_000_000, description="surface samples")
+    # absent means the default; null is accepted only where graspgen accepts it (friction, mass_kg, density)
+    points: int = Field(None, ge=100, le=1_000_000, description="surface samples (default 10000)")
     friction: float | None = Field(None, gt=0, le=10, description="Coulomb coefficient; default the gripper's")
-    safety_factor: float | None = Field(None, ge=1, le=100, description="friction cone half-angle divisor")
-    rolls: int | None = Field(None, ge=1, le=64, description="roll angles 2 pi k / rolls tested per pair")
-    k1: int | None = Field(None, ge=1, le=10_000, description="translation clusters")
-    k2: int | None = Field(None, ge=1, le=1_000, description="direction clusters per translation cluster")
-    inside: bool | None = Field(None, description="also grasp from inside (bores), fingers opening outwards")
-    collision: Literal["swept", "paper"] | None = Field(None, description="collision model of criterion (d)")
-    seed: int | None = Field(None, ge=0, le=2**32 - 1)
-    mass_kg: float | None = Field(None, gt=0, description="part mass, kg (criterion (e)); default the object's")
-    density: float | None = Field(None, ge=1, le=100_000, description="part density, kg/m^3 (mass = density x volume)")
-    accel: float | None = Field(None, ge=0, description="acceleration the hold must resist besides gravity, m/s^2")
-    hold: Literal["any", "off"] | None = Field(None, description="criterion (e): `off` switches it off")
-    position_tolerance: float | None = Field(
-        None, ge=0, description="m: criterion (c) must hold for every normal within this distance of a contact"
+    safety_factor: float = Field(None, ge=1, le=100, description="friction cone half-angle divisor (default 1.5)")
+    rolls: int = Field(None, ge=1, le=64, description="roll angles 2 pi k / rolls tested per pair (default 16)")
+    k1: int = Field(None, ge=1, le=10_000, description="translation clusters (default 16)")
+    k2: int = Field(None, ge=1, le=1_000, description="direction clusters per translation cluster (default 4)")
+    inside: bool = Field(None, description="also grasp from inside (bores), fingers opening outwards")
+    collision: Literal["swept", "paper"] = Field(None, description="collision model of criterion (d)")
+    seed: int = Field(None, ge=0, le=2**32 - 1)
+    mass_kg: float | None = Field(
+        None, gt=0, le=100_000, description="part mass, kg (criterion (e)); default the object's; not with density"
+    )
+    density: float | None = Field(
+        None, ge=1, le=100_000, description="part density, kg/m^3 (mass = density x mesh volume); not with mass_kg"
+    )
+    accel: float = Field(None, ge=0, le=1_000, description="acceleration the hold must resist, m/s^2 (default 9.81)")
+    hold: Literal["any", "off"] = Field(None, description="criterion (e): `off` switches it off (default any)")
+    position_tolerance: float = Field(
+        None, ge=0, le=0.05, description="m: criterion (c) must hold for every normal this close to a contact"
     )
     select: Literal["medoid", "best-near-medoid"] | None = Field(None, description="docs/QUALITY.md")
     validate_: bool | None = Field(

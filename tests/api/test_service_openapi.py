@@ -200,6 +200,18 @@ PARAM_CASES = [
     {"collision": "paper"},
     {"collision": "exact"},
     {"colour": "red"},
+    {"points": None},
+    {"friction": None},
+    {"mass_kg": 2.5},
+    {"mass_kg": 0.0},
+    {"density": 7850},
+    {"density": 0.5},
+    {"accel": 1000.0},
+    {"accel": 1001.0},
+    {"hold": "off"},
+    {"hold": "maybe"},
+    {"position_tolerance": 0.05},
+    {"position_tolerance": 0.06},
 ]
 
 
