@@ -11,14 +11,19 @@ pytestmark = pytest.mark.integration
 PROBLEM = "application/problem+json"
 
 
+@pytest.fixture(params=["pg_service", "sqlite_service"])
+def svc(request):  # type: ignore[no-untyped-def]
+    """PostgreSQL + Redis, and the embedded default (SQLite)."""
+    return request.getfixturevalue(request.param)
+
+
 def upload(svc, name: str, data: bytes, **form: str):  # type: ignore[no-untyped-def]
     return svc.post(
         "/v1/objects", files={"file": ("part.stl", data, "model/stl")}, data={"name": name, "units": "mm", **form}
     )
 
 
-def test_mass_is_stored_on_the_version_and_a_conflicting_mass_is_refused(pg_service):
-    svc = pg_service
+def test_mass_is_stored_on_the_version_and_a_conflicting_mass_is_refused(svc):
     name = slug("heavy")
     data = box_stl((40.0, 30.0, 20.0))
     r = upload(svc, name, data, mass_kg="0.25")
@@ -37,11 +42,11 @@ def test_mass_is_stored_on_the_version_and_a_conflicting_mass_is_refused(pg_serv
 
 
 @pytest.mark.parametrize("bad", ["0", "-1", "nan", "inf", "-inf", "1e9", "heavy"])
-def test_bad_mass_is_422_and_stores_nothing(pg_service, bad):
-    before = pg_service.row_counts()
-    r = upload(pg_service, slug("bad"), box_stl(), mass_kg=bad)
+def test_bad_mass_is_422_and_stores_nothing(svc, bad):
+    before = svc.row_counts()
+    r = upload(svc, slug("bad"), box_stl(), mass_kg=bad)
     assert r.status_code == 422 and r.headers["content-type"] == PROBLEM, (bad, r.text)
-    assert pg_service.row_counts() == before
+    assert svc.row_counts() == before
 
 
 def test_job_takes_the_objects_mass_unless_it_gives_mass_or_density(pg_service):
