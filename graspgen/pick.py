@@ -7,7 +7,8 @@ normal side of every plane. The survivors come best first in the set's quality o
 
 - `score`: the quality score (graspgen.quality.scores of the NPZ's `quality_terms`) when the set has quality terms,
   else the friction margin in degrees; higher is better;
-- ties by the smaller approach angle, then the smaller candidate index, then the smaller roll index.
+- ties by the smaller approach angle (to 1e-9 degrees), then the smaller candidate index, then the smaller roll
+  index.
 
 `T_world_grasp = T_world_object @ T_object_grasp(candidate, roll)`, with the contract's grasp frame and roll basis
 (graspgen.transforms). `PickIndex` holds the pairs' object-frame axes once per set, so that a query is one small
@@ -51,6 +52,8 @@ MAX_PLANES = 64
 DEFAULT_PREGRASP_DISTANCE = 0.05
 #: a pose's rotation must be orthonormal with det +1 and its last row 0 0 0 1 within this
 POSE_TOLERANCE = 1e-6
+#: approach angles are compared rounded to this many decimals of a degree (the tie-break after the score)
+ANGLE_DECIMALS = 9
 #: metres a box corner may lie on the wrong side of a plane and still count as on it (rounding, not clearance)
 PLANE_TOLERANCE = 1e-9
 
@@ -75,6 +78,7 @@ class PickIndex:
     width: np.ndarray  # (k,) contact distance, metres
     score: np.ndarray  # (k,)
     rank: np.ndarray  # (k,) int64, position in the quality order (score, candidate, roll)
+    by_rank: np.ndarray  # (k,) int64, the pairs in the quality order (the inverse of rank)
     labels: np.ndarray  # (n, 2) int32 per candidate
     medoid: np.ndarray  # (n,) bool per candidate: an exported representative
     friction_margin_deg: np.ndarray  # (n,)
@@ -127,6 +131,7 @@ class PickIndex:
             width=candidates.widths[ci],
             score=score,
             rank=rank,
+            by_rank=np.argsort(rank),
             labels=np.asarray(candidates.labels, dtype=np.int32),
             medoid=medoid,
             friction_margin_deg=np.asarray(candidates.friction_margin_deg, dtype=np.float64),
@@ -141,6 +146,7 @@ class PickIndex:
     @property
     def nbytes(self) -> int:
         arrays = (self.candidate, self.roll_index, self.frames, self.approach, self.width, self.score, self.rank)
+        arrays = (*arrays, self.by_rank)
         extra = 0 if self.hold_margin is None else self.hold_margin.nbytes
         per_candidate = self.labels.nbytes + self.medoid.nbytes + self.friction_margin_deg.nbytes + extra
         return sum(a.nbytes for a in arrays) + per_candidate + 1024
@@ -425,14 +431,35 @@ def _filter(
 
 
 def _best(index: PickIndex, ok: np.ndarray, cos_z: np.ndarray, limit: int) -> np.ndarray:
-    """Up to `limit` feasible pairs: by score, then approach angle, candidate, roll. Only the feasible pairs scoring
-    at least the limit-th one's score (in the quality order, found by a partition of the ranks) are sorted."""
-    idx = np.flatnonzero(ok)
-    if len(idx) > limit:
+    """Up to `limit` feasible pairs: by score, then approach angle, candidate, roll.
+
+    Only the feasible pairs scoring at least the limit-th feasible one's score are sorted. When feasible pairs are
+    common the quality order is walked from its top until `limit` of them turn up; otherwise the feasible pairs'
+    ranks are partitioned."""
+    n_ok = int(np.count_nonzero(ok))
+    if n_ok <= limit:
+        idx = np.flatnonzero(ok)
+    elif n_ok * 16 >= len(ok):
+        take = min(len(ok), max(4096, 4 * limit * len(ok) // n_ok))
+        while True:
+            top = index.by_rank[:take]
+            hits = top[ok[top]]
+            if len(hits) >= limit:
+                cut = index.score[hits[limit - 1]]
+                # the walk must reach past every pair scoring `cut`: equal scores are sorted below, not by rank
+                if take == len(ok) or index.score[index.by_rank[take - 1]] < cut:
+                    break
+            if take == len(ok):
+                break
+            take = min(len(ok), take * 4)
+        idx = hits[index.score[hits] >= cut]
+    else:
+        idx = np.flatnonzero(ok)
         kth = idx[np.argpartition(index.rank[idx], limit - 1)[limit - 1]]
-        s = index.score[idx]
-        idx = idx[s >= index.score[kth]]
-    order = np.lexsort((index.roll_index[idx], index.candidate[idx], -cos_z[idx], -index.score[idx]))
+        idx = idx[index.score[idx] >= index.score[kth]]
+    # angles equal to 1e-9 degrees are a tie (pairs of parallel candidates differ in the last bits), broken by index
+    angle = np.round(np.degrees(np.arccos(np.clip(cos_z[idx], -1.0, 1.0))), ANGLE_DECIMALS)
+    order = np.lexsort((index.roll_index[idx], index.candidate[idx], angle, -index.score[idx]))
     return idx[order[:limit]]
 
 

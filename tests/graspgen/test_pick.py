@@ -95,7 +95,7 @@ def brute_force(cands, gripper, T_wo, direction, max_angle_deg, planes, distance
             if not clear:
                 planes_out += 1
                 continue
-            rows.append((-per_cand[c], angle, c, r, T_wg))
+            rows.append((-per_cand[c], round(angle, 9), c, r, T_wg))
     rows.sort(key=lambda t: t[:4])
     return [(c, r, T, a) for _, a, c, r, T in rows[:limit]], len(rows), cone_out, planes_out
 
@@ -292,3 +292,16 @@ def test_hold_margins_of_the_set_come_with_the_grasps():
     r = graspgen.pick(replace(cands, hold_margin=margins), np.eye(4), limit=5, gripper=GRIPPER)
     assert [g["hold_margin"] for g in r.grasps] == [margins[g["candidate"]] for g in r.grasps]
     assert "hold_margin" not in graspgen.pick(cands, np.eye(4), limit=1, gripper=GRIPPER).grasps[0]
+
+
+@pytest.mark.parametrize("limit", [1, 7, 300])
+def test_the_walk_down_the_quality_order_keeps_ties(limit):
+    """Most pairs feasible and many equal scores (margins rounded to 0.1 degree): the top found by walking the
+    quality order in steps must equal the full sort, ties at the cut broken by the approach angle."""
+    cands = synthetic(n=2500, rolls=8, seed=7)
+    T = _turned()
+    approach = {"direction": [0.2, 0.1, -1.0], "max_angle_deg": 150}
+    r = graspgen.pick(cands, T, approach=approach, limit=limit, gripper=GRIPPER)
+    want, feasible, _, _ = brute_force(cands, GRIPPER, T, approach["direction"], 150, [], 0.05, limit)
+    assert r.feasible == feasible > 4096
+    assert [(g["candidate"], g["roll_index"]) for g in r.grasps] == [(c, k) for c, k, _, _ in want]
