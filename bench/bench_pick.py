@@ -117,15 +117,18 @@ def bench_library(cands: Candidates, repeat: int) -> tuple[PickIndex, list[tuple
         t = time.perf_counter()
         index = PickIndex.build(cands, spec)
         builds.append(time.perf_counter() - t)
-    rows = [("PickIndex.build (once per set)", "-", 1e3 * min(builds), 1e3 * max(builds), "-")]
+    rows = [("PickIndex.build (once per set)", "-", 1e3 * min(builds), 1e3 * max(builds), "-", "-")]
     for name, scene in SCENES.items():
-        times, feasible = [], 0
+        times, cpu, feasible = [], [], 0
         for _ in range(repeat):
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.process_time()
             result = PickQuery.parse(**scene).run(index)
             times.append(time.perf_counter() - t)
+            cpu.append(time.process_time() - c)
             feasible = result.feasible
-        rows.append((name, f"{feasible:,}", 1e3 * pct(times, 50), 1e3 * pct(times, 95), len(result.grasps)))
+        rows.append(
+            (name, f"{feasible:,}", 1e3 * pct(times, 50), 1e3 * pct(times, 95), 1e3 * pct(cpu, 50), len(result.grasps))
+        )
     return index, rows
 
 
@@ -295,11 +298,12 @@ def main() -> None:
     cands = synthetic(args.pairs, args.rolls)
     pairs = int(cands.free_rolls.sum())
     print(f"{len(cands):,} candidates, {args.rolls} rolls, {pairs:,} candidate rolls; {os.cpu_count()} CPUs")
+    print("load average at start: " + " ".join(f"{v:.1f}" for v in os.getloadavg()))
     index, rows = bench_library(cands, args.repeat)
     print(f"prepared pairs: {index.nbytes / 1e6:.1f} MB in the cache")
     table(
         f"library: PickQuery.parse + run, {args.repeat} runs",
-        ("scene", "feasible", "p50 ms", "p95 ms", "grasps"),
+        ("scene", "feasible", "p50 ms", "p95 ms", "CPU p50 ms", "grasps"),
         rows,
     )
     if not args.skip_http:
@@ -310,6 +314,7 @@ def main() -> None:
             ("scene", "feasible", "p50 ms", "p95 ms", "response bytes"),
             rows,
         )
+    print("\nload average at end: " + " ".join(f"{v:.1f}" for v in os.getloadavg()))
 
 
 if __name__ == "__main__":
