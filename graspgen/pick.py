@@ -11,10 +11,11 @@ normal side of every plane. The survivors come best first in the set's quality o
   index.
 
 `T_world_grasp = T_world_object @ T_object_grasp(candidate, roll)`, with the contract's grasp frame and roll basis
-(graspgen.transforms). `PickIndex` holds the pairs' object-frame axes once per set, so that a query is one small
-matrix product and a few vector operations over all pairs: a box lies on the normal side of a plane exactly when its
-lowest corner does, and the lowest corner's height is the centre's height minus the half extents weighted by |m|,
-where m is the plane normal in the grasp frame.
+(graspgen.transforms). `PickIndex` holds the pairs' object-frame axes once per set; a query turns the world-frame
+direction and planes into the object frame and is then a few vector operations: the cone over every pair, the planes
+over the pairs inside the cone. A box lies on the normal side of a plane exactly when its lowest corner does, and the
+lowest corner's height is the centre's height minus the half extents weighted by |m|, where m is the plane normal in
+the grasp frame (the brute-force test checks the 8 corners).
 """
 
 from __future__ import annotations
