@@ -26,7 +26,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from sqlalchemy import select, update
+from sqlalchemy import func, select, tuple_, update
 from sqlalchemy.orm import Session
 
 from .models import (
@@ -86,49 +86,93 @@ class PairState:
     change_seq: int
 
 
-def _newest(session: Session, column, owner, owner_id: int) -> int | None:  # type: ignore[no-untyped-def]
-    model = column.class_
-    return session.execute(
-        select(model.id).where(owner == owner_id).order_by(model.version.desc()).limit(1)
-    ).scalar_one_or_none()
+def _newest_versions(session: Session, model, owner_column, owner_ids: set[int]) -> dict[int, int]:  # type: ignore[no-untyped-def]
+    """owner id -> id of its highest version (object or gripper versions), one query for all owners."""
+    top = (
+        select(owner_column.label("owner"), func.max(model.version).label("v"))
+        .where(owner_column.in_(owner_ids))
+        .group_by(owner_column)
+        .subquery()
+    )
+    rows = session.execute(
+        select(owner_column, model.id).join(top, (top.c.owner == owner_column) & (top.c.v == model.version))
+    )
+    return {owner: vid for owner, vid in rows}
 
 
-def _compute(session: Session, pair: CataloguePair) -> tuple[int | None, bool]:
-    """(current set id, stale) of a pair from its released set and the newest versions."""
-    ov = _newest(session, ObjectVersion.id, ObjectVersion.object_id, pair.object_id)
-    gv = _newest(session, GripperVersion.id, GripperVersion.gripper_id, pair.gripper_id)
-    if pair.released_id is not None:
-        row = session.execute(
-            select(GraspSet.object_version_id, GraspSet.gripper_version_id, GraspSet.withdrawn_at).where(
-                GraspSet.id == pair.released_id
+def _compute(session: Session, pairs: list[CataloguePair]) -> list[tuple[int | None, bool]]:
+    """(current set id, stale) of each pair from its released set and the newest versions, in a fixed number of
+    queries however many pairs (a new gripper version recomputes every pair of the gripper under the counter lock)."""
+    object_ids = {p.object_id for p in pairs}
+    gripper_ids = {p.gripper_id for p in pairs}
+    ov = _newest_versions(session, ObjectVersion, ObjectVersion.object_id, object_ids)
+    gv = _newest_versions(session, GripperVersion, GripperVersion.gripper_id, gripper_ids)
+    released_ids = {p.released_id for p in pairs if p.released_id is not None}
+    released = (
+        {
+            r.id: r
+            for r in session.execute(
+                select(
+                    GraspSet.id, GraspSet.object_version_id, GraspSet.gripper_version_id, GraspSet.withdrawn_at
+                ).where(GraspSet.id.in_(released_ids))
             )
-        ).one()
-        if row.withdrawn_at is None:
-            return pair.released_id, (row.object_version_id != ov or row.gripper_version_id != gv)
-        pair.released_id = None  # a withdrawn set is never the released one
-    current = session.execute(
-        select(GraspSet.id)
-        .where(
-            GraspSet.object_id == pair.object_id,
-            GraspSet.gripper_id == pair.gripper_id,
-            GraspSet.object_version_id == ov,
-            GraspSet.gripper_version_id == gv,
-            GraspSet.withdrawn_at.is_(None),
+        }
+        if released_ids
+        else {}
+    )
+    # the newest set of each pair made for the newest versions, not withdrawn
+    newest: dict[tuple[int, int], int] = {}
+    if ov and gv:
+        top = (
+            select(GraspSet.object_id, GraspSet.gripper_id, func.max(GraspSet.version).label("v"))
+            .where(
+                GraspSet.object_id.in_(object_ids),
+                GraspSet.gripper_id.in_(gripper_ids),
+                GraspSet.object_version_id.in_(set(ov.values())),
+                GraspSet.gripper_version_id.in_(set(gv.values())),
+                GraspSet.withdrawn_at.is_(None),
+            )
+            .group_by(GraspSet.object_id, GraspSet.gripper_id)
         )
-        .order_by(GraspSet.version.desc())
-        .limit(1)
-    ).scalar_one_or_none()
-    return current, False
+        # the version filter above admits another object's newest version id only if it were this object's too,
+        # which cannot be (versions belong to one object); likewise for grippers
+        tops = {(o, g): v for o, g, v in session.execute(top)}
+        if tops:
+            rows = session.execute(
+                select(GraspSet.id, GraspSet.object_id, GraspSet.gripper_id).where(
+                    tuple_(GraspSet.object_id, GraspSet.gripper_id, GraspSet.version).in_(
+                        [(o, g, v) for (o, g), v in tops.items()]
+                    )
+                )
+            )
+            newest = {(o, g): i for i, o, g in rows}
+    out: list[tuple[int | None, bool]] = []
+    for p in pairs:
+        r = released.get(p.released_id) if p.released_id is not None else None
+        if r is not None and r.withdrawn_at is None:
+            stale = r.object_version_id != ov.get(p.object_id) or r.gripper_version_id != gv.get(p.gripper_id)
+            out.append((p.released_id, stale))
+            continue
+        p.released_id = None  # a withdrawn set is never the released one
+        out.append((newest.get((p.object_id, p.gripper_id)), False))
+    return out
 
 
-def _refresh_pair(session: Session, seq: ChangeSequence, pair: CataloguePair, *, force: bool = False) -> bool:
-    before = (pair.current_id, pair.released_id, pair.stale)
-    pair.current_id, pair.stale = _compute(session, pair)
-    if force or (pair.current_id, pair.released_id, pair.stale) != before:
-        pair.change_seq = seq.take()
-        pair.updated_at = utcnow()
-        return True
-    return False
+def _refresh_pairs(session: Session, seq: ChangeSequence, pairs: list[CataloguePair], *, force: bool = False) -> int:
+    """Store each pair's current set; a pair whose served state changed (or any, with `force`, or a new pair) takes
+    the next change number. Returns how many did."""
+    if not pairs:
+        return 0
+    before = [(p.current_id, p.released_id, p.stale) for p in pairs]
+    changed = 0
+    now = utcnow()
+    for p, old, (current, stale) in zip(pairs, before, _compute(session, pairs), strict=True):
+        p.current_id, p.stale = current, stale
+        if force or p.change_seq == 0 or (p.current_id, p.released_id, p.stale) != old:
+            p.change_seq = seq.take()
+            p.updated_at = now
+            changed += 1
+    return changed
 
 
 def _hold(session: Session, object_id: int, gripper_id: int) -> None:
@@ -170,7 +214,7 @@ def refresh(session: Session, *, object_id: int | None = None, gripper_id: int |
         # existing pairs only: their updates change no foreign key, so no further row locks
         seq = ChangeSequence(session)
         pairs = list(session.execute(q.order_by(CataloguePair.object_id, CataloguePair.gripper_id)).scalars())
-    changed = sum(_refresh_pair(session, seq, p, force=p.change_seq == 0) for p in pairs)
+    changed = _refresh_pairs(session, seq, pairs)
     seq.save()
     session.flush()
     return changed
@@ -210,7 +254,7 @@ def release(session: Session, grasp_set_id: int, by: str) -> tuple[PairState, Ca
     session.add(event)
     gs.withdrawn_at = None
     pair.released_id = gs.id
-    _refresh_pair(session, seq, pair, force=True)
+    _refresh_pairs(session, seq, [pair], force=True)
     seq.save()
     session.flush()
     return _state(pair), event
@@ -231,7 +275,7 @@ def withdraw(session: Session, grasp_set_id: int, by: str) -> tuple[PairState, C
     gs.withdrawn_at = at
     if pair.released_id == gs.id:
         pair.released_id = None
-    _refresh_pair(session, seq, pair, force=pair.change_seq == 0)
+    _refresh_pairs(session, seq, [pair])
     seq.save()
     session.flush()
     return _state(pair), event

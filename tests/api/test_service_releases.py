@@ -429,3 +429,27 @@ def test_a_robot_syncing_during_concurrent_changes_ends_with_the_catalogue(svc):
     marks.append(mark)
     assert marks == sorted(marks) and len(marks) > 2
     assert robot == {i["object"]: i["id"] for i in sync(svc, grip)[0]}
+
+
+def test_a_new_gripper_version_recomputes_every_pair_of_the_gripper(svc):
+    grip = slug("gv")
+    names = sorted(slug("p") for _ in range(3))
+    ids = {}
+    for n in names:
+        pair(svc, grip, n)
+        ids[n] = add_set(svc, n, grip)
+    one, two, three = names
+    assert svc.post(f"/v1/grasp-sets/{ids[one]}/release").status_code == 200
+    _, mark = sync(svc, grip)
+    assert svc.gripper(grip, finger_depth=0.035).json()["version"] == 2  # new fingers
+    assert served(svc, one, grip) == (200, ids[one], "true", "true")  # the release holds, now stale
+    assert served(svc, two, grip)[0] == 404 and served(svc, three, grip)[0] == 404
+    delta, mark2 = sync(svc, grip, since=mark)
+    assert {i["object"]: (i["id"], i["stale"], i["withdrawn"]) for i in delta} == {
+        one: (ids[one], True, False),
+        two: (None, False, True),
+        three: (None, False, True),
+    }
+    fresh = add_set(svc, two, grip)
+    assert served(svc, two, grip) == (200, fresh, "false", "false")
+    assert [(i["object"], i["id"]) for i in sync(svc, grip, since=mark2)[0]] == [(two, fresh)]
