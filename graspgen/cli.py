@@ -17,6 +17,7 @@ from typing import Any
 
 from .errors import Cancelled, GraspgenError, InvalidUnitsError
 from .examples import EXAMPLE_GRIPPER
+from .params import HOLD_MODES
 
 __all__ = ["main", "DEMO_GRIPPER"]
 
@@ -49,8 +50,24 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
         default="medoid",
         help="medoid (the paper) or the best-scoring member near each medoid (docs/QUALITY.md)",
     )
-    p.add_argument("--validate", action="store_true", help="simulate every exported grasp in MuJoCo")
-    p.add_argument("--density", type=float, default=None, help="part density for --validate, kg/m^3 (default 7850)")
+    p.add_argument(
+        "--validate",
+        action="store_true",
+        help="simulate every exported grasp in MuJoCo (needs the part's mass and the gripper's grip_force)",
+    )
+    m = p.add_mutually_exclusive_group()
+    m.add_argument("--mass", type=float, default=None, help="the part's mass, kg (criterion (e) and --validate)")
+    m.add_argument("--density", type=float, default=None, help="the part's density, kg/m^3 (mass = density x volume)")
+    p.add_argument("--accel", type=float, default=9.81, help="acceleration beyond gravity a held part resists, m/s^2")
+    p.add_argument(
+        "--hold", choices=HOLD_MODES, default="any", help="criterion (e): any (default, needs mass and grip_force), off"
+    )
+    p.add_argument(
+        "--position-tolerance",
+        type=float,
+        default=0.001,
+        help="criterion (c) holds for every surface normal within this distance of a contact, m (default 0.001)",
+    )
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -129,11 +146,16 @@ def _run_kwargs(args: argparse.Namespace) -> dict[str, Any]:
         inside=args.inside,
         collision=args.collision,
         seed=args.seed,
+        mass_kg=args.mass,
+        density=args.density,
+        accel=args.accel,
+        hold=args.hold,
+        position_tolerance=args.position_tolerance,
     )
 
 
 def _quality_kwargs(args: argparse.Namespace) -> dict[str, Any]:
-    return dict(select=args.select, validate=args.validate, density=args.density)
+    return dict(select=args.select, validate=args.validate)
 
 
 def _preview_of(mesh_path: str, units: str):
@@ -340,6 +362,7 @@ def _summary(result) -> str:
         ("rejected: outside", f"{rej['outside']:,}"),
         ("rejected: friction", f"{rej['friction']:,}"),
         ("rejected: collision", f"{rej['collision']:,}"),
+        ("rejected: hold", f"{rej['hold']:,}" if "hold" in s else "off"),
         ("candidates", f"{s['candidates']:,}"),
         ("grasps", f"{len(result.grasps)}"),
         *_quality_rows(s),

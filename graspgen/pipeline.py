@@ -130,9 +130,11 @@ def generate(
     cell = antipodal.pair_cell_size(spec.stroke, params.inside, spec.finger_thickness)
     order = antipodal.grid_order(sample.points, cell)
     pts, nrm = sample.points[order], sample.normals[order]
+    t1 = time.perf_counter()
     tree = meshtree.build_tree(part.mesh.vertices, part.mesh.faces) if part.mesh is not None else None
     spread = _normal_spread(tree, pts, nrm, params.position_tolerance)
     timings["sample"] = time.perf_counter() - t0
+    timings["sample_mesh_tree"] = time.perf_counter() - t1
     report("sample", 1.0)
 
     report("pairs", 0.0)
@@ -189,7 +191,8 @@ def generate(
         keep = exact.any(axis=1)
         ci, cj, free, inside = ci[keep], cj[keep], exact[keep], inside[keep]
         margins = margins[keep] if margins is not None else None
-    timings["collision"] += time.perf_counter() - t0
+    timings["collision_mesh"] = time.perf_counter() - t0
+    timings["collision"] += timings["collision_mesh"]
 
     fm = antipodal.friction_margin_deg(pts, nrm, ci, cj, inside, half_angle)
     contacts = np.stack([pts[ci], pts[cj]], axis=1).reshape(-1, 2, 3)
@@ -296,20 +299,24 @@ def _collide_in_blocks(plan, pts, nrm, spec: GripperSpec, params: Params, timing
         t0 = time.perf_counter()
         bi, bj, bins = plan.fill(r0, r1)
         p0 = int(plan.offsets[r0])
+        block = len(bi)
+        pos = np.arange(block)  # each pair's place in the block, for progress
         if spread is not None:
             ok = antipodal.within_spread(pts, nrm, bi, bj, bins, spread, half_angle)
             if not ok.all():
                 n_tolerance += int(np.sum(~ok))
-                bi, bj, bins = bi[ok], bj[ok], bins[ok]
+                bi, bj, bins, pos = bi[ok], bj[ok], bins[ok], pos[ok]
         t_fill += time.perf_counter() - t0
         t0 = time.perf_counter()
         free = np.zeros((len(bi), params.rolls), dtype=bool)
         # segment boundaries: the block's ends and every multiple of `step` inside it
-        cuts = np.unique(np.r_[0, np.arange(-p0 % step, len(bi), step), len(bi)])
+        cuts = np.unique(np.r_[0, np.searchsorted(pos, np.arange(-p0 % step, block, step)), len(bi)])
         for lo, hi in zip(cuts[:-1], cuts[1:], strict=True):
             sl = slice(int(lo), int(hi))
             free[sl] = _collision.free_rolls_of_pairs(pts, bi[sl], bj[sl], bins[sl], model, params.rolls, normals=nrm)
-            report("collision", (p0 + int(hi)) / m)
+            report("collision", (p0 + (block if hi == len(bi) else int(pos[hi]))) / m)
+        if len(bi) == 0 and m:
+            report("collision", (p0 + block) / m)
         keep = free.any(axis=1)
         n_kept += int(keep.sum())
         if n_kept > MAX_CANDIDATES:

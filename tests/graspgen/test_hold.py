@@ -334,3 +334,25 @@ def test_mesh_check_finds_a_feature_between_samples():
     assert by_points[0, palm_below].all() and exact[0, palm_below].all()
     # exact never frees what the points blocked
     assert not np.any(exact & ~by_points)
+
+
+def test_cli_mass_and_hold_options(tmp_path, capsys):
+    from graspgen.cli import main
+
+    mesh = tmp_path / "bar.stl"
+    _bar().export(mesh)
+    gripper = tmp_path / "g.json"
+    gripper.write_text(json.dumps(GRIPPER))
+    out = tmp_path / "grasps.json"
+    base = ["generate", str(mesh), "--units", "m", "--gripper", str(gripper), "--points", "2000", "--k1", "4"]
+    assert main([*base, "--k2", "1", "--mass", "0.2", "--out", str(out)]) == 0
+    export = json.loads(out.read_text())
+    assert export["params"]["hold"] == "any" and export["params"]["mass_kg"] == 0.2
+    assert all(g["hold_margin"] >= 1.0 for g in export["grasps"])
+    assert "rejected: hold" in capsys.readouterr().out
+    # bad input: exit 2, one line, nothing written
+    bad = tmp_path / "bad.json"
+    for extra in (["--mass", "0.2", "--density", "7800"], ["--mass", "-1"], ["--hold", "maybe"], ["--validate"]):
+        assert main([*base, *extra, "--out", str(bad)]) == 2, extra
+        assert not bad.exists()
+        assert capsys.readouterr().err.strip().count("\n") == 0

@@ -89,6 +89,11 @@ def test_export_matches_the_contract():
     assert d["format"] == "graspgen.grasp_set/1" and d["units"] == "m"
     assert set(d["object"]) >= {"name", "version", "sha256", "source_units"}
     assert set(d["params"]) == {
+        "mass_kg",
+        "density",
+        "accel",
+        "hold",
+        "position_tolerance",
         "points",
         "friction",
         "safety_factor",
@@ -294,7 +299,9 @@ def test_every_exported_grasp_satisfies_all_criteria(part, friction, safety, rol
         expect = ref.free_rolls(
             sample.points, c.midpoints[m], c.axes[m], c.widths[m], c.inside[m], gs.gripper, mode, rolls
         )
-        assert np.array_equal(c.free_rolls[m], expect)
+        # the mesh-exact check (meshtree.py) may only take rolls away from the point test's
+        assert not np.any(c.free_rolls[m] & ~expect)
+        assert c.free_rolls[m].any(axis=1).all()
     assert gs.stats["candidates"] == len(gs.candidates)
     rej = gs.stats["rejected"]
     assert sum(rej.values()) + gs.stats["candidates"] == gs.stats["pairs_total"]
