@@ -255,6 +255,11 @@ def test_fleet_sync_by_change_number_reports_releases_withdrawals_and_dropped_pa
     assert robot == {i["object"]: i["id"] for i in sync(svc, grip)[0]} == {a: newer, b: ids[b]}
     bad = svc.get(f"/v1/catalogue?gripper={grip}&since=-1")
     assert bad.status_code == 422
+    from services.api.pagination import encode_cursor
+
+    for forged in ([2**63, 0], [0, 2**70], ["x", 0]):
+        r = svc.get(f"/v1/catalogue?gripper={grip}&since=0&cursor={encode_cursor(forged)}")
+        assert r.status_code == 422 and r.json()["code"] == "invalid-cursor", (forged, r.text)
 
 
 def test_concurrent_catalogue_changes_commit_in_change_order(pg_service):

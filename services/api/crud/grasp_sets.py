@@ -287,6 +287,10 @@ def _pair_ids(session: Session, object: str, gripper: str) -> tuple[int, int]:
     return _id_of(session, ObjectModel, object, "object"), _id_of(session, Gripper, gripper, "gripper")
 
 
+#: change numbers are PostgreSQL bigint; a forged cursor beyond them is a 422, not a database error
+SEQ_MAX = 2**62
+
+
 def _catalogue_item(row: Any, summary: dict[str, Any] | None, gripper: str) -> dict[str, Any]:
     """A fleet-sync entry: the current set's summary with the pair's state, or, when the pair serves nothing any
     more (its set was withdrawn, or a newer object or gripper version has no set yet), `id: null, withdrawn: true`."""
@@ -330,6 +334,8 @@ def list_catalogue(
         raise ApiError(422, "validation-error", "since must be >= 0", field="since")
     if key:
         after, mark = key
+        if not 0 <= mark <= SEQ_MAX or (by_seq and not 0 <= after <= SEQ_MAX):
+            raise ApiError(422, "invalid-cursor", "the cursor is not one this endpoint issued")
     else:
         after = since if by_seq else None
         # read before the rows: every change numbered up to the mark committed before it (the counter lock), so the
