@@ -59,7 +59,12 @@ def _run(name: str, points: int) -> dict:
     rej = s["rejected"]
     return {
         "candidates": s["candidates"],
-        "pairs": s["pairs_total"] - rej["stroke"] - rej["outside"] - rej["friction"],
+        # in flight through the collision stage: before the position tolerance's finer (c), as the probe counts
+        "pairs": s["pairs_total"]
+        - rej["stroke"]
+        - rej["outside"]
+        - rej["friction"]
+        + s.get("exact", {}).get("friction_position_tolerance", 0),
         "seconds": time.perf_counter() - t0,
         "base_bytes": base,
         "peak_bytes": _status_kb("VmHWM") * 1024,
@@ -103,7 +108,7 @@ def main() -> None:
         print(json.dumps(res))
         return
     print(
-        "| part | points | pairs (a)-(c) est. | pairs | candidates est. | candidates | peak est. (MB) | "
+        "| part | points | pairs in flight est. | pairs | candidates est. | candidates | peak est. (MB) | "
         "base (MB) | peak measured (MB) | est. / measured | job s |"
     )
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
