@@ -87,6 +87,7 @@ EXAMPLE_GRIPPER: dict[str, object] = {
     "palm_width": 0.02,
     "friction": 0.5,
     "pregrasp_clearance": 0.02,
+    "grip_force": 20.0,
 }
 
 EXAMPLES: dict[str, Callable[[], trimesh.Trimesh]] = {

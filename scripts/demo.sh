@@ -3,4 +3,5 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh
-exec .venv/bin/graspgen demo "$@"
+# the example parts are steel: criterion (e) gets their mass from the density (docs/HOLD.md)
+exec .venv/bin/graspgen demo --density 7850 "$@"
