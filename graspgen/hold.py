@@ -37,6 +37,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
+from .sampling import cell_grid
+
 _CHUNK = 1024  # candidates per unit of parallel work
 
 __all__ = ["HoldModel", "HOLD", "torsion_radii", "hold_margins", "part_mass", "hold_load"]
@@ -95,21 +97,14 @@ def torsion_radii(points: np.ndarray, normals: np.ndarray, pad_radius: float, mo
     k = len(pts)
     if k == 0:
         return np.zeros(0, dtype=np.float64)
-    cell = max(float(pad_radius), 1e-9)
-    origin = pts.min(axis=0)
-    idx = np.floor((pts - origin) / cell).astype(np.int64)
-    dims = idx.max(axis=0) + 1
-    flat = (idx[:, 0] * dims[1] + idx[:, 1]) * dims[2] + idx[:, 2]
-    order = np.argsort(flat, kind="stable")
-    cell_start = np.zeros(int(np.prod(dims)) + 1, dtype=np.int64)
-    np.cumsum(np.bincount(flat, minlength=int(np.prod(dims))), out=cell_start[1:])
+    order, cells, cell_start, dims = cell_grid(pts, pad_radius)
     out = np.empty(k, dtype=np.float64)
     _radii_kernel(
         pts[order],
         nrm[order],
-        idx[order],
+        cells,
         cell_start,
-        dims.astype(np.int64),
+        dims,
         float(pad_radius),
         float(model.pad_compliance),
         math.cos(math.radians(model.patch_normal_deg)),

@@ -31,6 +31,8 @@ import numpy as np
 from numba import njit, prange
 from scipy.spatial import cKDTree
 
+from .sampling import cell_grid
+
 __all__ = [
     "TERMS",
     "QualityWeights",
@@ -143,16 +145,9 @@ def point_flatness(points: np.ndarray, normals: np.ndarray, radius: float) -> np
     nrm = np.ascontiguousarray(normals, dtype=np.float64).reshape(-1, 3)
     if len(pts) == 0:
         return np.ones(0, dtype=np.float64)
-    cell = max(float(radius), 1e-9)
-    origin = pts.min(axis=0)
-    idx = np.floor((pts - origin) / cell).astype(np.int64)
-    dims = idx.max(axis=0) + 1
-    flat = (idx[:, 0] * dims[1] + idx[:, 1]) * dims[2] + idx[:, 2]
-    order = np.argsort(flat, kind="stable")
-    cell_start = np.zeros(int(np.prod(dims)) + 1, dtype=np.int64)
-    np.cumsum(np.bincount(flat, minlength=int(np.prod(dims))), out=cell_start[1:])
+    order, cells, cell_start, dims = cell_grid(pts, radius)
     out = np.empty(len(pts), dtype=np.float64)
-    _flatness_kernel(pts[order], nrm[order], idx[order], cell_start, dims.astype(np.int64), float(radius) ** 2, out)
+    _flatness_kernel(pts[order], nrm[order], cells, cell_start, dims, float(radius) ** 2, out)
     result = np.empty_like(out)
     result[order] = out
     return result

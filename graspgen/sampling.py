@@ -325,3 +325,17 @@ def _eliminate(offsets, nbr, w, weight, target):
                 prv[h] = j
             head[b] = j
     return alive
+
+
+def cell_grid(points: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A grid of cubes `cell` metres wide over `points` (k, 3), for compiled neighbour passes that look at a point's
+    cell and the 26 around it: (order (k,) sorting the points by cell, their cells (k, 3) int64 in that order,
+    cell_start (cells + 1,) offsets into that order per flat cell index, dims (3,) int64)."""
+    cell = max(float(cell), 1e-9)
+    idx = np.floor((points - points.min(axis=0)) / cell).astype(np.int64)
+    dims = idx.max(axis=0) + 1
+    flat = (idx[:, 0] * dims[1] + idx[:, 1]) * dims[2] + idx[:, 2]
+    order = np.argsort(flat, kind="stable")
+    cell_start = np.zeros(int(np.prod(dims)) + 1, dtype=np.int64)
+    np.cumsum(np.bincount(flat, minlength=int(np.prod(dims))), out=cell_start[1:])
+    return order, idx[order], cell_start, dims.astype(np.int64)
