@@ -249,7 +249,9 @@ def test_a_two_gram_pin_is_held_without_spinning_out(shared_meshes):
     from graspgen.pipeline import _poses
 
     part = graspgen.load_part(shared_meshes / "trimesh_round.stl", units="mm")
-    gs = graspgen.generate(part, GRIPPER, points=1500, k1=3, k2=2)
+    # the paper's criteria without the position tolerance: with it (1 mm) a 5 mm pin keeps no candidate, and this
+    # test is about the simulation of such a small part
+    gs = graspgen.generate(part, GRIPPER, points=1500, k1=3, k2=2, hold="off", position_tolerance=0.0)
     c = gs.candidates
     idx = c.medoids
     sim = physics.prepare_part(part.mesh, SPEC, density=2700.0)
