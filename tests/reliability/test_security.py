@@ -31,6 +31,10 @@ def assert_clean(service, r) -> None:  # type: ignore[no-untyped-def]
 
 
 # -- scopes -----------------------------------------------------------------------------------------------------------
+#: POST routes that only read (CONTRACT.md: the pick query takes scope read; its query is too large for a URL)
+READ_POSTS = {"/v1/pick"}
+
+
 def _write_routes(app) -> list[tuple[str, str]]:  # type: ignore[no-untyped-def]
     """(method, url) of every write operation in the app's own OpenAPI document, path parameters filled with
     well-formed values (app.routes holds included routers lazily in this FastAPI, the document lists them all)."""
@@ -38,6 +42,8 @@ def _write_routes(app) -> list[tuple[str, str]]:  # type: ignore[no-untyped-def]
     for path, item in app.openapi()["paths"].items():
         for method, op in item.items():
             if method.upper() not in WRITE_METHODS:
+                continue
+            if path in READ_POSTS:
                 continue
             url = path
             for p in op.get("parameters", []):
