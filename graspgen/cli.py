@@ -1,4 +1,5 @@
-"""`graspgen` command line: generate, demo; serve / worker / migrate start the service (services.cli).
+"""`graspgen` command line: generate, demo; serve / worker / migrate start the service, found through the entry-point
+group `graspgen.service` (the library never imports it; `pip install 'graspgen[service]'` installs it).
 
 Exit status: 0 success, 2 bad input (one-line reason on stderr, no output written), 1 internal error.
 """
@@ -96,17 +97,36 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--size", default="800x600", help="WIDTHxHEIGHT in pixels (default 800x600)")
     w = sub.add_parser("warmup", help="compile every numba kernel into numba's on-disk cache (no cold start)")
     w.add_argument("--quiet", action="store_true", help="print nothing but errors")
-    for name in ("serve", "worker", "migrate"):
+    for name in SERVICE_COMMANDS:
         sub.add_parser(name, help=f"service: {name} (see docs/SERVICE.md)", add_help=False)
     return parser
 
 
+#: the entry-point group the service registers its command line under (pyproject.toml)
+SERVICE_GROUP = "graspgen.service"
+SERVICE_COMMANDS = ("serve", "worker", "migrate")
+SERVICE_MISSING = "graspgen: the service is not installed: pip install 'graspgen[service]'"
+
+
+def _service_main(argv: list[str], group: str = SERVICE_GROUP) -> int:
+    """Run `graspgen serve | worker | migrate` through the service's entry point; exit 2 when it is not installed."""
+    from importlib.metadata import entry_points
+
+    found = entry_points(group=group, name="cli")
+    try:
+        service_main = next(iter(found)).load() if found else None
+    except ImportError:  # registered, but the service's dependencies are not installed
+        service_main = None
+    if service_main is None:
+        print(SERVICE_MISSING, file=sys.stderr)
+        return 2
+    return int(service_main(argv))
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    if argv and argv[0] in ("serve", "worker", "migrate"):
-        from services.cli import main as service_main
-
-        return service_main(argv)
+    if argv and argv[0] in SERVICE_COMMANDS:
+        return _service_main(argv)
     try:
         args = _parser().parse_args(argv)
     except _UsageError as exc:

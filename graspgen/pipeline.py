@@ -359,6 +359,13 @@ def _normal_spread(tree, pts, nrm, tolerance: float) -> np.ndarray | None:
 
 
 def _check_validation_inputs(mass: float | None, spec: GripperSpec) -> None:
+    try:  # the `validate` extra: the library alone does not install them
+        import coacd  # noqa: F401
+        import mujoco  # noqa: F401
+    except ImportError as exc:
+        raise InvalidParameterError(
+            f"validate needs {exc.name}: pip install 'graspgen[validate]'", field="validate"
+        ) from None
     if mass is None:
         raise InvalidParameterError("validate needs the part's mass: give mass_kg or density", field="mass_kg")
     if spec.grip_force is None:

@@ -10,7 +10,7 @@ fi
 stamp=$(cat pyproject.toml constraints.txt | sha256sum | cut -d' ' -f1)
 if [ "$(cat .venv/.setup-stamp 2>/dev/null)" != "$stamp" ]; then
   .venv/bin/python -m pip install -q --disable-pip-version-check --upgrade pip >/dev/null
-  .venv/bin/python -m pip install -q --disable-pip-version-check -c constraints.txt -e '.[dev]'
+  .venv/bin/python -m pip install -q --disable-pip-version-check -c constraints.txt -e '.[dev,service,validate,client]'
   echo "$stamp" > .venv/.setup-stamp
 fi
 # numba's kernels compiled into its on-disk cache (graspgen/__pycache__, or NUMBA_CACHE_DIR) whenever graspgen's

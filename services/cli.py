@@ -156,8 +156,11 @@ def _worker(args: argparse.Namespace) -> int:
     _logging(settings.log_level, settings.log_format)
     if settings.metrics_port is not None:
         _metrics_dir(settings)  # the prefork children count jobs; the main process serves their sum
-    from services.worker.celery_app import celery_app
+    from services.worker.celery_app import make_celery
+    from services.worker.reconcile import connect_worker_signals
 
+    celery_app = make_celery(settings)
+    connect_worker_signals(settings)  # the reconciler in the main process, a temp directory per prefork child
     _metrics_server(settings)
 
     argv = [
@@ -187,12 +190,29 @@ def _migrate(args: argparse.Namespace) -> int:
     return 0
 
 
+#: modules of the `service` extra every command needs (an install without the extra has this package, not them)
+_REQUIRED = ("fastapi", "uvicorn", "sqlalchemy", "alembic", "celery", "pydantic_settings")
+
+
+def missing_dependencies() -> list[str]:
+    import importlib.util
+
+    return [m for m in _REQUIRED if importlib.util.find_spec(m) is None]
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # argparse exits 2 on bad usage, 0 on --help
         return int(exc.code or 0)
+    missing = missing_dependencies()
+    if missing:
+        print(
+            f"graspgen: the service is not installed ({', '.join(missing)} missing): pip install 'graspgen[service]'",
+            file=sys.stderr,
+        )
+        return 2
     try:
         return {"serve": _serve, "worker": _worker, "migrate": _migrate}[args.command](args)
     except KeyboardInterrupt:

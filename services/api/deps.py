@@ -15,6 +15,7 @@ from services.common.tokens import Principal, TokenStore
 from services.worker.dispatch import Dispatcher
 
 from .problems import ApiError
+from .ratelimit import check_rate
 
 __all__ = [
     "SessionDep",
@@ -75,8 +76,6 @@ async def get_principal(
     principal = tokens.authenticate(credentials.credentials)
     if principal is None:
         raise ApiError(401, "unauthorized", "the bearer token is not valid", headers=challenge)
-    from .observability import check_rate
-
     check_rate(request, principal.name)  # 429 when per-token rate limits are on and this token is over its rate
     return principal
 

@@ -7,8 +7,6 @@ and every request is counted in `graspgen_http_request_duration_seconds` under i
 
 from __future__ import annotations
 
-import math
-import threading
 import time
 from typing import Any
 
@@ -19,7 +17,7 @@ from services.common.logs import REQUEST_ID_HEADER, new_request_id, request_id_v
 from services.common.metrics import CONTENT_TYPE_LATEST, HTTP_DURATION, QueueDepthCollector, render, scrape_registry
 
 from .deps import AdminDep
-from .problems import ApiError
+from .ratelimit import TokenBuckets
 from .routers import problems
 
 __all__ = ["RequestContextMiddleware", "TokenBuckets", "router", "install"]
@@ -72,47 +70,6 @@ class RequestContextMiddleware:
                 series = self._series[key] = HTTP_DURATION.labels(key[0], template, str(status))
             series.observe(elapsed)
             request_id_var.reset(token)
-
-
-class TokenBuckets:
-    """A token bucket per bearer-token name: `rate` requests per second, up to `burst` at once."""
-
-    def __init__(self, rate: float, burst: int) -> None:
-        self.rate = rate
-        self.burst = float(burst)
-        self._buckets: dict[str, tuple[float, float]] = {}  # name -> (tokens, last refill, monotonic)
-        self._lock = threading.Lock()
-
-    def take(self, name: str) -> float:
-        """0 when the request may go ahead, else the seconds until it would."""
-        now = time.monotonic()
-        with self._lock:
-            tokens, last = self._buckets.get(name, (self.burst, now))
-            tokens = min(self.burst, tokens + (now - last) * self.rate)
-            if tokens >= 1.0:
-                self._buckets[name] = (tokens - 1.0, now)
-                return 0.0
-            self._buckets[name] = (tokens, now)
-            return (1.0 - tokens) / self.rate
-
-
-def check_rate(request: Request, name: str) -> None:
-    """Refuse the request with a 429 problem and Retry-After when the token is over its rate (when limits are on)."""
-    limiter: TokenBuckets | None = getattr(request.app.state, "rate_limiter", None)
-    if limiter is None:
-        return
-    wait = limiter.take(name)
-    if wait > 0:
-        from services.common.metrics import RATE_LIMITED
-
-        RATE_LIMITED.inc()
-        raise ApiError(
-            429,
-            "rate-limited",
-            f"this token makes more than {limiter.rate:g} requests per second; retry later",
-            title="Too many requests",
-            headers={"Retry-After": str(max(1, math.ceil(wait)))},
-        )
 
 
 router = APIRouter(tags=["health"])

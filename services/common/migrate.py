@@ -9,15 +9,17 @@ from alembic.config import Config
 
 from .settings import Settings
 
-__all__ = ["alembic_config", "upgrade", "downgrade"]
+__all__ = ["alembic_config", "upgrade", "downgrade", "MIGRATIONS"]
 
-_ROOT = Path(__file__).resolve().parents[2]
+#: the migrations ship inside the service package (a wheel install has them; alembic.ini is only for in-tree use)
+MIGRATIONS = Path(__file__).resolve().parents[1] / "migrations"
 
 
 def alembic_config(settings: Settings) -> Config:
-    ini = _ROOT / "alembic.ini"
-    cfg = Config(str(ini)) if ini.is_file() else Config()
-    cfg.set_main_option("script_location", str(_ROOT / "migrations"))
+    cfg = Config()
+    cfg.set_main_option("script_location", str(MIGRATIONS))
+    cfg.set_main_option("path_separator", "os")
+    cfg.set_main_option("file_template", "%%(rev)s_%%(slug)s")
     cfg.attributes["settings"] = settings
     cfg.attributes["configure_logger"] = False
     return cfg

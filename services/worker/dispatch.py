@@ -88,11 +88,12 @@ class EmbeddedDispatcher(Dispatcher):
     """A thread pool inside the API process running `run_job.apply` (the Celery task, executed locally)."""
 
     def __init__(self, settings: Settings, db: Database, storage) -> None:  # type: ignore[no-untyped-def]
-        from services.worker import tasks
+        from services.worker.celery_app import job_task, make_celery
         from services.worker.runner import JobRunner
 
-        tasks.set_runner(JobRunner(db, storage, settings))
-        self._task = tasks.run_job
+        # an app of this dispatcher's own, whose tasks run with the API process's runner (its engine and storage)
+        self.app = make_celery(settings, runner=JobRunner(db, storage, settings))
+        self._task = job_task(self.app)
         self._pool = ThreadPoolExecutor(max_workers=settings.embedded_workers, thread_name_prefix="graspgen-job")
         self._futures: dict[str, Future] = {}
         self._lock = threading.Lock()
@@ -145,18 +146,7 @@ class EmbeddedDispatcher(Dispatcher):
 
     def close(self) -> None:
         self._pool.shutdown(wait=False, cancel_futures=True)
-
-    def wait_idle(self, timeout: float = 60.0) -> bool:
-        """Tests and the demo: wait until no job is pending in this process."""
-        import time
-
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            with self._lock:
-                if not self._futures:
-                    return True
-            time.sleep(0.05)
-        return False
+        self.app.close()
 
 
 def _request_headers() -> dict[str, str] | None:

@@ -32,7 +32,7 @@ import time
 import uuid
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from datetime import datetime, timedelta
+from datetime import timedelta
 from pathlib import Path
 
 from sqlalchemy import select
@@ -40,6 +40,7 @@ from sqlalchemy import select
 from services.common.db import Database
 from services.common.models import Job, utcnow
 from services.common.settings import Settings
+from services.worker.runner import abandoned_before
 
 __all__ = [
     "Reconciler",
@@ -50,6 +51,7 @@ __all__ = [
     "sweep_temp",
     "start",
     "stop",
+    "connect_worker_signals",
 ]
 
 log = logging.getLogger(__name__)
@@ -61,11 +63,6 @@ _PRIORITY_SEP = "\x06\x16"
 _PRIORITY_STEPS = (0, 3, 6, 9)
 _UNACKED_KEY = "unacked"
 _SCAN_CHUNK = 1000
-
-
-def abandoned_before(settings: Settings, now: datetime | None = None) -> datetime:
-    """A running job whose row last changed before this has no live worker: no run outlives the hard time limit."""
-    return (now or utcnow()) - timedelta(seconds=settings.job_time_limit_s + settings.reconcile_grace_s)
 
 
 @dataclass
@@ -284,29 +281,22 @@ def stop(timeout: float = 5.0) -> None:
         _thread = None
 
 
-def _connect_signals() -> None:
+def connect_worker_signals(settings: Settings) -> None:
+    """The reconciler in a worker's main process (a pass when it is ready, then periodic ones; stopped at shutdown) and
+    a private temp directory in every prefork child. Called where a worker starts (`graspgen worker`,
+    services/worker/celery_main.py), never on import; connecting again replaces the earlier connection."""
     from celery.signals import worker_process_init, worker_ready, worker_shutdown
 
-    def settings_of(sender) -> Settings:  # type: ignore[no-untyped-def]
-        app = getattr(sender, "app", None)
-        settings = getattr(getattr(app, "conf", None), "graspgen_settings", None)
-        if settings is None:
-            from services.worker.celery_app import celery_app
+    def on_ready(sender=None, **_kw) -> None:  # type: ignore[no-untyped-def]
+        start(settings)
 
-            settings = celery_app.conf.graspgen_settings
-        return settings
-
-    @worker_ready.connect(weak=False)
-    def _on_ready(sender=None, **_kw) -> None:  # type: ignore[no-untyped-def]
-        start(settings_of(sender))
-
-    @worker_shutdown.connect(weak=False)
-    def _on_shutdown(sender=None, **_kw) -> None:  # type: ignore[no-untyped-def]
+    def on_shutdown(sender=None, **_kw) -> None:  # type: ignore[no-untyped-def]
         stop()
 
-    @worker_process_init.connect(weak=False)
-    def _on_child(sender=None, **_kw) -> None:  # type: ignore[no-untyped-def]
+    def on_child(sender=None, **_kw) -> None:  # type: ignore[no-untyped-def]
         use_private_tempdir()
 
-
-_connect_signals()
+    for signal, handler in ((worker_ready, on_ready), (worker_shutdown, on_shutdown), (worker_process_init, on_child)):
+        uid = f"graspgen.reconcile.{handler.__name__}"
+        signal.disconnect(dispatch_uid=uid)
+        signal.connect(handler, weak=False, dispatch_uid=uid)

@@ -15,6 +15,7 @@ import time
 import uuid
 from collections.abc import Callable
 from dataclasses import dataclass
+from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
 
@@ -39,9 +40,16 @@ from services.common.models import (
 from services.common.settings import Settings
 from services.common.storage import Storage, StorageError, StoredBlob, make_storage
 
-__all__ = ["JobRunner", "STAGE_WEIGHTS", "QUALITY_KWARGS", "HOLD_KWARGS", "stage_weights"]
+__all__ = ["JobRunner", "STAGE_WEIGHTS", "QUALITY_KWARGS", "HOLD_KWARGS", "stage_weights", "abandoned_before"]
 
 log = logging.getLogger(__name__)
+
+
+def abandoned_before(settings: Settings, now: datetime | None = None) -> datetime:
+    """A running job whose row last changed before this has no live worker: no run outlives the hard time limit
+    (the claim below and the reconciler, services/worker/reconcile.py, both use it)."""
+    return (now or utcnow()) - timedelta(seconds=settings.job_time_limit_s + settings.reconcile_grace_s)
+
 
 #: share of a job's progress bar per core stage (the core reports a fraction within each stage); "validate" (MuJoCo
 #: simulation of the exported grasps) runs only with params.validate and is left out, the rest rescaled, otherwise
@@ -169,8 +177,6 @@ class JobRunner:
 
     # -- claim ----------------------------------------------------------------------------------------------------
     def _abandoned(self, job: Job) -> bool:
-        from services.worker.reconcile import abandoned_before
-
         return job.updated_at < abandoned_before(self.settings)
 
     def _claim(self, jid: uuid.UUID, redelivered: bool = True) -> _Inputs | str:

@@ -6,45 +6,40 @@ import logging
 import os
 import threading
 
-from celery import Task
+from celery import Celery, Task, shared_task
 from celery.exceptions import TimeLimitExceeded
 from sqlalchemy.exc import OperationalError
 
 from services.common.logs import REQUEST_ID_MESSAGE_HEADER, log_context, valid_request_id
-from services.common.settings import Settings
-from services.worker.celery_app import celery_app
+from services.worker.celery_app import RUN_JOB
 from services.worker.runner import JobRunner
 
-__all__ = ["run_job", "get_runner", "set_runner"]
+__all__ = ["run_job", "get_runner"]
 
 log = logging.getLogger(__name__)
 
-_runner: JobRunner | None = None
-#: the process that built _runner; None for one installed by set_runner
-_runner_pid: int | None = None
 _runner_lock = threading.Lock()
 
 
-def set_runner(runner: JobRunner | None) -> None:
-    """The embedded mode installs the API process's runner (sharing its engine and storage)."""
-    global _runner, _runner_pid
-    _runner, _runner_pid = runner, None
+def get_runner(app: Celery) -> JobRunner:
+    """The runner of `app`'s tasks: the one passed to make_celery (embedded mode), else this process's own.
 
-
-def get_runner() -> JobRunner:
-    # built lazily, so that a prefork child opens its own database connections after the fork; and built again in a
-    # child forked after the main process made one (on_failure runs there after a hard time limit): the inherited
-    # engine's pooled connections are the parent's sockets
-    global _runner, _runner_pid
+    A worker process's own runner is built lazily, so that a prefork child opens its own database connections after
+    the fork; and built again in a child forked after the main process made one (on_failure runs there after a hard
+    time limit): the inherited engine's pooled connections are the parent's sockets.
+    """
+    given: JobRunner | None = app.conf.get("graspgen_runner")
+    if given is not None:
+        return given
     with _runner_lock:
-        if _runner is not None and _runner_pid is not None and _runner_pid != os.getpid():
-            _runner.db.engine.dispose(close=False)  # forget the parent's connections without touching them
-            _runner = None
-        if _runner is None:
-            settings: Settings = celery_app.conf.graspgen_settings
-            _runner = JobRunner.from_settings(settings)
-            _runner_pid = os.getpid()
-        return _runner
+        pid, runner = app.conf.get("graspgen_process_runner") or (None, None)
+        if runner is not None and pid != os.getpid():
+            runner.db.engine.dispose(close=False)  # forget the parent's connections without touching them
+            runner = None
+        if runner is None:
+            runner = JobRunner.from_settings(app.conf.graspgen_settings)
+            app.conf.graspgen_process_runner = (os.getpid(), runner)
+        return runner
 
 
 class JobTask(Task):
@@ -52,13 +47,13 @@ class JobTask(Task):
         # a hard time limit kills the child process; this hook then runs in the worker's main process
         if isinstance(exc, TimeLimitExceeded) and args:
             try:
-                get_runner().fail_time_limit(str(args[0]))
+                get_runner(self.app).fail_time_limit(str(args[0]))
             except Exception:  # the database may be what is failing; the job then stays for the next delivery
                 log.exception("could not mark job %s failed after the hard time limit", args[0])
 
 
-@celery_app.task(
-    name="graspgen.run_job",
+@shared_task(
+    name=RUN_JOB,
     base=JobTask,
     bind=True,
     # the database was unreachable: the job row could not even be claimed or finished, so try again later
@@ -80,15 +75,15 @@ def run_job(self: Task, job_id: str) -> str:
     # run carries it and the job id
     request_id = getattr(req, REQUEST_ID_MESSAGE_HEADER, None) or (req.headers or {}).get(REQUEST_ID_MESSAGE_HEADER)
     if request_id is None:  # a message the reconciler sent again, or one sent before request ids existed
-        request_id = _stored_request_id(job_id)
+        request_id = _stored_request_id(self.app, job_id)
     with log_context(request_id=valid_request_id(request_id), job_id=str(job_id)):
         log.info("job %s: run (delivery %d)", job_id, req.retries + 1)
-        state = get_runner().run(job_id, redelivered=redelivered)
+        state = get_runner(self.app).run(job_id, redelivered=redelivered)
         log.info("job %s: %s", job_id, state)
         return state
 
 
-def _stored_request_id(job_id: str) -> str | None:
+def _stored_request_id(app: Celery, job_id: str) -> str | None:
     """The request id kept on the job's row (one small read; only for messages that came without one)."""
     import uuid
 
@@ -97,7 +92,7 @@ def _stored_request_id(job_id: str) -> str | None:
     from services.common.models import Job
 
     try:
-        with get_runner().db.read_sessions() as s:
+        with get_runner(app).db.read_sessions() as s:
             return s.execute(select(Job.request_id).where(Job.id == uuid.UUID(str(job_id)))).scalar_one_or_none()
     except Exception:  # the run itself reports a bad id or an unreachable database
         return None

@@ -199,3 +199,73 @@ def test_console_script_runs(files):
     assert r.stdout == "" and "[" not in r.stderr  # quiet, and no progress bar off a terminal
     r = subprocess.run([str(exe), "generate"], capture_output=True, text=True, timeout=60)
     assert r.returncode == 2
+
+
+def test_service_commands_without_the_service_exit_2(capsys):
+    from graspgen.cli import _service_main
+
+    code = _service_main(["migrate"], group="graspgen.no-such-service")  # what an install without the service sees
+    out, err = capsys.readouterr()
+    assert code == 2 and out == ""
+    assert err.strip() == "graspgen: the service is not installed: pip install 'graspgen[service]'"
+
+
+def test_service_commands_without_the_service_extra_exit_2(tmp_path, monkeypatch, capsys):
+    import services.cli
+
+    # the package is there (one distribution) but a dependency of the `service` extra is not
+    monkeypatch.setattr(services.cli, "_REQUIRED", ("sqlalchemy", "graspgen_no_such_module"))
+    monkeypatch.setenv("GRASPGEN_STORAGE_DIR", str(tmp_path / "var"))
+    assert main(["migrate"]) == 2
+    out, err = capsys.readouterr()
+    assert "graspgen_no_such_module missing" in err and "pip install 'graspgen[service]'" in err
+    assert not (tmp_path / "var").exists()  # nothing written
+
+
+def test_the_service_is_found_through_its_entry_point():
+    from importlib.metadata import entry_points
+
+    from graspgen.cli import SERVICE_GROUP
+
+    (ep,) = entry_points(group=SERVICE_GROUP, name="cli")
+    assert ep.value == "services.cli:main"
+
+
+_BLOCK_VALIDATE_EXTRA = """
+import sys
+class _Block:
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] in ("mujoco", "coacd", "services", "fastapi", "sqlalchemy", "celery"):
+            raise ModuleNotFoundError(f"No module named {name!r}", name=name)
+sys.meta_path.insert(0, _Block())
+from graspgen.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_the_library_runs_without_the_validate_and_service_extras(files):
+    tmp, mesh, gripper = files
+    argv = [mesh, "--units", "mm", "--gripper", gripper, "--points", 400, "--out", tmp / "x.json", "--quiet"]
+    r = subprocess.run(
+        [sys.executable, "-c", _BLOCK_VALIDATE_EXTRA, "generate", *map(str, argv)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=tmp,
+    )
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp / "x.json").read_text())["format"] == "graspgen.grasp_set/1"
+    r = subprocess.run(
+        [sys.executable, "-c", _BLOCK_VALIDATE_EXTRA, "serve"], capture_output=True, text=True, timeout=60, cwd=tmp
+    )
+    assert r.returncode == 2 and "pip install 'graspgen[service]'" in r.stderr
+    argv[-2:-1] = [tmp / "v.json", "--validate"]
+    r = subprocess.run(
+        [sys.executable, "-c", _BLOCK_VALIDATE_EXTRA, "generate", *map(str, argv), "--mass", "0.1"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=tmp,
+    )
+    assert r.returncode == 2 and not (tmp / "v.json").exists()
+    assert "validate needs coacd: pip install 'graspgen[validate]'" in r.stderr

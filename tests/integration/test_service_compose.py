@@ -45,9 +45,12 @@ def test_worker_health_check_names_the_celery_app_module():
     test = " ".join(SERVICES["worker"]["healthcheck"]["test"])
     module = re.search(r"-A\s+(\S+)", test).group(1)
     assert importlib.util.find_spec(module) is not None
-    from services.worker.celery_app import celery_app
+    from celery.app.utils import find_app
 
-    assert "graspgen.run_job" in celery_app.tasks
+    from services.worker.celery_app import job_task
+
+    app = find_app(module)  # what `celery -A <module>` loads
+    assert job_task(app).name == "graspgen.run_job"
 
 
 @pytest.mark.parametrize("name", APP)

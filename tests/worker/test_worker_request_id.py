@@ -26,7 +26,7 @@ class _Records(logging.Handler):
 @pytest.mark.parametrize("header", [True, False], ids=["message-header", "job-row"])
 def test_every_line_of_the_run_carries_the_request_id(pg_service, header):
     from services.common.logs import REQUEST_ID_MESSAGE_HEADER
-    from services.worker import tasks
+    from services.worker.celery_app import job_task, make_celery
     from services.worker.runner import JobRunner
 
     obj, grip = slug("rid"), slug("grip")
@@ -45,13 +45,13 @@ def test_every_line_of_the_run_carries_the_request_id(pg_service, header):
     old_level = root.level
     root.addHandler(handler)
     root.setLevel(logging.INFO)
-    tasks.set_runner(JobRunner(state.db, state.storage, pg_service.settings))
+    app = make_celery(pg_service.settings, runner=JobRunner(state.db, state.storage, pg_service.settings))
     try:
         headers = {REQUEST_ID_MESSAGE_HEADER: rid} if header else None
-        result = tasks.run_job.apply(args=(jid,), task_id=jid, headers=headers)
+        result = job_task(app).apply(args=(jid,), task_id=jid, headers=headers)
         assert result.get() == "succeeded"
     finally:
-        tasks.set_runner(None)
+        app.close()
         root.removeHandler(handler)
         root.setLevel(old_level)
     mine = [rec for rec in handler.records if rec.job_id == jid]

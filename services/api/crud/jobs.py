@@ -11,7 +11,7 @@ import uuid
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import and_, delete, func, or_, select
+from sqlalchemy import and_, delete, or_, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
@@ -495,7 +495,3 @@ def cancel_job(session: Session, dispatcher: Dispatcher, principal: Principal, j
     if revoke:
         dispatcher.revoke(revoke)
     return job
-
-
-def count_jobs(session: Session) -> int:
-    return session.execute(select(func.count()).select_from(Job)).scalar_one()

@@ -1,0 +1,124 @@
+"""The built wheel, not the source tree: `graspgen migrate`, `graspgen serve` and one job from a fresh venv outside the
+repository (issue 17: the migrations ship inside the service package; the library finds the service through its entry
+point).
+
+The venv gets the wheel without dependencies; the dependencies come from the project's venv through a path line in a
+.pth file (a path line adds the directory, it does not run the .pth files there, so the editable install of the
+repository is not on the path). Every process runs with its working directory outside the repository.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import site
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+from services_conftest import GRIPPER, box_stl, free_port, settings_env, stop_process, wait_for_log, wait_http
+
+pytestmark = [pytest.mark.integration, pytest.mark.slow]
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _env(**values: object) -> dict[str, str]:
+    env = settings_env(**values)
+    env.pop("PYTHONPATH", None)
+    return env
+
+
+@pytest.fixture(scope="module")
+def wheel_venv(tmp_path_factory) -> Path:
+    work = tmp_path_factory.mktemp("wheel")
+    assert not work.resolve().is_relative_to(ROOT)
+    src = work / "src"  # a copy of what the wheel is built from, so the build writes nothing into the repository
+    src.mkdir()
+    for name in ("pyproject.toml", "README.md", "LICENSE"):
+        shutil.copy(ROOT / name, src / name)
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", "*.nbi", "*.nbc")
+    for name in ("graspgen", "services"):
+        shutil.copytree(ROOT / name, src / name, ignore=ignore)
+    dist = work / "dist"
+    subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--disable-pip-version-check", "-w", str(dist), "."],
+        cwd=src,
+        check=True,
+        timeout=600,
+    )
+    (whl,) = dist.glob("graspgen-*.whl")
+    venv = work / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], cwd=work, check=True, timeout=120)
+    (purelib,) = (venv / "lib").glob("python3*/site-packages")
+    (purelib / "project-deps.pth").write_text("\n".join(site.getsitepackages()) + "\n")
+    subprocess.run(
+        [sys.executable, "-m", "pip", "--python", str(venv / "bin" / "python"), "install", "-q", "--no-deps"]
+        + ["--disable-pip-version-check", str(whl)],
+        cwd=work,
+        check=True,
+        timeout=300,
+    )
+    return venv
+
+
+def test_the_wheel_is_the_library_and_the_service(wheel_venv, tmp_path):
+    where = subprocess.run(
+        [
+            str(wheel_venv / "bin" / "python"),
+            "-c",
+            "import graspgen, importlib.util as u; print(graspgen.__file__); "
+            "print(u.find_spec('services.migrations.env').origin)",
+        ],
+        cwd=tmp_path,
+        env=_env(),
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    )
+    lib, env_py = where.stdout.split()
+    assert Path(lib).is_relative_to(wheel_venv) and Path(env_py).is_relative_to(wheel_venv)
+    assert (Path(env_py).parent / "versions" / "0001_initial_schema.py").is_file()
+
+
+def test_migrate_serve_and_one_job_from_the_wheel(wheel_venv, tmp_path):
+    graspgen = str(wheel_venv / "bin" / "graspgen")
+    var = tmp_path / "var"
+    env = _env(storage_dir=var)
+    migrate = subprocess.run([graspgen, "migrate"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+    assert migrate.returncode == 0, migrate.stderr
+    assert "is at head" in migrate.stdout and (var / "graspgen.sqlite3").is_file()
+
+    port = free_port()
+    log_path = tmp_path / "serve.log"
+    with open(log_path, "wb") as out:
+        proc = subprocess.Popen(
+            [graspgen, "serve", "--port", str(port)], cwd=tmp_path, env=env, stdout=out, stderr=subprocess.STDOUT
+        )
+    try:
+        wait_for_log(log_path, "Uvicorn running", proc, timeout=300)
+        url = f"http://127.0.0.1:{port}"
+        wait_http(url + "/healthz")
+        token = (var / "admin-token").read_text().strip()
+        with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {token}"}, timeout=600) as c:
+            up = c.post("/v1/objects", files={"file": ("box.stl", box_stl())}, data={"name": "box", "units": "mm"})
+            assert up.status_code == 201, up.text
+            assert c.post("/v1/grippers", json=GRIPPER).status_code == 201
+            job = c.post(
+                "/v1/jobs", json={"object": "box", "gripper": "pgn-80", "params": {"points": 800, "k1": 4, "k2": 2}}
+            )
+            assert job.status_code == 202, job.text
+            end = time.monotonic() + 900  # the wheel's kernels are new to numba's cache: the first job compiles them
+            while (body := c.get(f"/v1/jobs/{job.json()['id']}").json())["state"] in ("queued", "running"):
+                assert time.monotonic() < end, body
+                time.sleep(0.5)
+            assert body["state"] == "succeeded", body
+            gs = c.get(f"/v1/grasp-sets/{body['grasp_set']}").json()
+            assert gs["format"] == "graspgen.grasp_set/1"
+    finally:
+        stop_process(proc)
+    assert os.path.exists(var / "graspgen.sqlite3")
