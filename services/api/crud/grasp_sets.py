@@ -24,7 +24,7 @@ from services.common.models import (
     ObjectVersion,
 )
 
-from ..pagination import decode_cursor, encode_cursor
+from ..pagination import decode_cursor, fetch_page, next_link
 from ..problems import ApiError
 from ..schemas import ID_MAX
 
@@ -157,15 +157,12 @@ def list_grasp_sets(
         q = q.where(Gripper.name == gripper)
     if key:
         q = q.where(GraspSet.id < key[0])
-    rows = session.execute(q.order_by(GraspSet.id.desc()).limit(limit + 1)).all()
-    more = len(rows) > limit
-    rows = rows[:limit]
-    nxt = encode_cursor([rows[-1].id]) if more and rows else None
+    rows, nxt = fetch_page(session, q.order_by(GraspSet.id.desc()), limit, lambda r: [r.id])
     query = "".join(f"&{k}={v}" for k, v in (("object", object), ("gripper", gripper)) if v)
     return {
         "items": [summary_out(r) for r in rows],
         "next_cursor": nxt,
-        "links": {"next": f"/v1/grasp-sets?cursor={nxt}&limit={limit}{query}" if nxt else None},
+        "links": {"next": next_link("/v1/grasp-sets", nxt, limit, query)},
     }
 
 
@@ -367,9 +364,8 @@ def list_catalogue(
             pairs = pairs.join(GraspSet, GraspSet.id == CataloguePair.current_id).where(
                 GraspSet.created_at > updated_since
             )
-    rows = session.execute(pairs.limit(limit + 1)).all()
-    more = len(rows) > limit
-    rows = rows[:limit]
+    rows, nxt = fetch_page(session, pairs, limit, lambda r: [r.change_seq, mark] if by_seq else [r.object, mark])
+    more = nxt is not None
     ids = [r.current_id for r in rows if r.current_id is not None]
     summaries = (
         {r.id: summary_out(r) for r in session.execute(summary_select().where(GraspSet.id.in_(ids))).all()}
@@ -377,9 +373,6 @@ def list_catalogue(
         else {}
     )
     items = [_catalogue_item(r, summaries.get(r.current_id), gripper) for r in rows]
-    nxt = None
-    if more and rows:
-        nxt = encode_cursor([rows[-1].change_seq, mark] if by_seq else [rows[-1].object, mark])
     if by_seq:
         delivered = max((int(r.change_seq) for r in rows), default=0)
         # a page cut short resumes after its last item; the last page after everything seen so far
@@ -413,17 +406,14 @@ def catalogue_history(session: Session, object: str, gripper: str, *, cursor: st
     )
     if key:
         q = q.where(CatalogueEvent.id < key[0])
-    rows = session.execute(q.order_by(CatalogueEvent.id.desc()).limit(limit + 1)).all()
-    more = len(rows) > limit
-    rows = rows[:limit]
-    nxt = encode_cursor([rows[-1][0].id]) if more and rows else None
+    rows, nxt = fetch_page(session, q.order_by(CatalogueEvent.id.desc()), limit, lambda r: [r[0].id])
     return {
         "object": object,
         "gripper": gripper,
         "items": [event_out(e, v) for e, v in rows],
         "next_cursor": nxt,
         "links": {
-            "next": f"/v1/catalogue/{object}/{gripper}/history?cursor={nxt}&limit={limit}" if nxt else None,
+            "next": next_link(f"/v1/catalogue/{object}/{gripper}/history", nxt, limit),
             "catalogue": f"/v1/catalogue/{object}/{gripper}",
         },
     }
@@ -505,10 +495,7 @@ def list_grasps(
         q = q.where(Grasp.friction_margin_deg >= min_friction_margin_deg)
     if key:
         q = q.where(Grasp.rank > key[0])
-    rows = session.execute(q.order_by(Grasp.rank).limit(limit + 1)).scalars().all()
-    more = len(rows) > limit
-    rows = rows[:limit]
-    nxt = encode_cursor([rows[-1].rank]) if more and rows else None
+    rows, nxt = fetch_page(session, q.order_by(Grasp.rank), limit, lambda g: [g.rank], scalars=True)
     return {
         "items": [
             {
@@ -525,5 +512,5 @@ def list_grasps(
             for g in rows
         ],
         "next_cursor": nxt,
-        "links": {"next": f"/v1/grasp-sets/{grasp_set_id}/grasps?cursor={nxt}&limit={limit}" if nxt else None},
+        "links": {"next": next_link(f"/v1/grasp-sets/{grasp_set_id}/grasps", nxt, limit)},
     }

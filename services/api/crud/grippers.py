@@ -13,7 +13,7 @@ from services.common import catalogue
 from services.common.jobs import sha256_json
 from services.common.models import Gripper, GripperVersion, utcnow
 
-from ..pagination import decode_cursor, encode_cursor
+from ..pagination import decode_cursor, fetch_page, next_link
 from ..problems import ApiError
 
 __all__ = ["create_gripper", "gripper_out", "get_gripper_version", "list_grippers", "version_out"]
@@ -114,16 +114,13 @@ def list_grippers(session: Session, *, cursor: str | None, limit: int) -> dict[s
     q = select(Gripper, latest.c.latest).join(latest, latest.c.gripper_id == Gripper.id)
     if key:
         q = q.where(Gripper.name > key[0])
-    rows = session.execute(q.order_by(Gripper.name).limit(limit + 1)).all()
-    more = len(rows) > limit
-    rows = rows[:limit]
+    rows, nxt = fetch_page(session, q.order_by(Gripper.name), limit, lambda r: [r[0].name])
     items = [
         {"name": g.name, "latest_version": v, "updated_at": g.updated_at, "links": {"self": f"/v1/grippers/{g.name}"}}
         for g, v in rows
     ]
-    nxt = encode_cursor([rows[-1][0].name]) if more and rows else None
     return {
         "items": items,
         "next_cursor": nxt,
-        "links": {"next": f"/v1/grippers?cursor={nxt}&limit={limit}" if nxt else None},
+        "links": {"next": next_link("/v1/grippers", nxt, limit)},
     }

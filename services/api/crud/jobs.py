@@ -34,7 +34,7 @@ from services.common.storage import Storage, StorageError
 from services.common.tokens import Principal
 from services.worker.dispatch import Dispatcher, DispatchError
 
-from ..pagination import decode_cursor, encode_cursor
+from ..pagination import decode_cursor, fetch_page, next_link
 from ..problems import ApiError
 from ..schemas import BulkRequest, JobRequest
 
@@ -420,10 +420,8 @@ def list_jobs(
         if at.tzinfo is None:
             raise ApiError(422, "invalid-cursor", "the cursor is not one this endpoint issued")
         q = q.where(or_(Job.created_at < at, and_(Job.created_at == at, Job.id < jid)))
-    rows = session.execute(q.order_by(Job.created_at.desc(), Job.id.desc()).limit(limit + 1)).scalars().all()
-    more = len(rows) > limit
-    rows = rows[:limit]
-    nxt = encode_cursor([rows[-1].created_at.isoformat(), str(rows[-1].id)]) if more and rows else None
+    order = q.order_by(Job.created_at.desc(), Job.id.desc())
+    rows, nxt = fetch_page(session, order, limit, lambda j: [j.created_at.isoformat(), str(j.id)], scalars=True)
     query = "".join(f"&{k}={v}" for k, v in (("state", state), ("kind", kind)) if v)
     return {
         "items": [
@@ -445,7 +443,7 @@ def list_jobs(
             for j in rows
         ],
         "next_cursor": nxt,
-        "links": {"next": f"/v1/jobs?cursor={nxt}&limit={limit}{query}" if nxt else None},
+        "links": {"next": next_link("/v1/jobs", nxt, limit, query)},
     }
 
 

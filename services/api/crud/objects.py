@@ -20,7 +20,7 @@ from services.common.models import ObjectModel, ObjectVersion, utcnow
 from services.common.settings import Settings
 from services.common.storage import Storage
 
-from ..pagination import decode_cursor, encode_cursor
+from ..pagination import decode_cursor, fetch_page, next_link
 from ..problems import ApiError
 
 __all__ = ["check_slug", "upload_object", "get_object", "get_version", "list_objects", "version_out", "object_out"]
@@ -251,9 +251,7 @@ def list_objects(session: Session, *, cursor: str | None, limit: int) -> dict[st
     q = select(ObjectModel, latest.c.latest).join(latest, latest.c.object_id == ObjectModel.id)
     if key:
         q = q.where(ObjectModel.name > key[0])
-    rows = session.execute(q.order_by(ObjectModel.name).limit(limit + 1)).all()
-    more = len(rows) > limit
-    rows = rows[:limit]
+    rows, nxt = fetch_page(session, q.order_by(ObjectModel.name), limit, lambda r: [r[0].name])
     items = [
         {
             "name": o.name,
@@ -263,9 +261,8 @@ def list_objects(session: Session, *, cursor: str | None, limit: int) -> dict[st
         }
         for o, latest_v in rows
     ]
-    nxt = encode_cursor([rows[-1][0].name]) if more and rows else None
     return {
         "items": items,
         "next_cursor": nxt,
-        "links": {"next": f"/v1/objects?cursor={nxt}&limit={limit}" if nxt else None},
+        "links": {"next": next_link("/v1/objects", nxt, limit)},
     }
