@@ -13,15 +13,18 @@ The tree: a binary tree over triangle centroids, split at the median of the long
 triangles per leaf; per node an axis-aligned box and a ball (centre, radius) around its triangles. A query walks
 the tree once per candidate and carries the set of rolls still free: a node is entered only at the rolls at which
 it may meet a box (its ball against the region's x range and radial band around the closing axis, then its box
-against the region's box by separating axes), and a triangle is tested only at the rolls at which its angular
-sector around the axis meets the region's.
+against the region's box by separating axes); a triangle is tested at the rolls its node met, when its extent
+along the closing axis meets the region's.
 
 Tried and not kept (bench/bench_criteria.py, thick ring and tless_04 at 10,000 points): certifying most rolls with
 the point kernel and boxes grown by the sample's covering radius, testing triangles only where that failed (same
 masks; 10 % faster on the ring, 35 % slower on tless_04: the covering radius, 1.3 mm at 10,000 points, is larger
 than the fingers' 1 mm contact margin and a quarter of the rolls stay in doubt); splitting long triangles to 1/25
 or 1/100 of the part's diagonal (4-5x slower: more triangles near each box); node balls instead of node boxes
-(5x slower on tless_04, whose palm lies parallel to large faces).
+(5x slower on tless_04, whose palm lies parallel to large faces); each triangle's angular sector and radial band
+around the axis against the region's before the per-roll tests (25-30 % slower: three atan2 per triangle cost more
+than the tests they save); testing the fingers once for rolls k and k + R/2 (their box is the same there):
+within the noise.
 """
 
 from __future__ import annotations
@@ -317,9 +320,7 @@ def mesh_free_rolls(
         tree.nodes,
         tree.children,
         reg,
-        _region_sectors(reg),
         model_f,
-        psi,
         np.cos(psi),
         np.sin(psi),
         float(switch),
@@ -327,79 +328,13 @@ def mesh_free_rolls(
     return out
 
 
-def _region_sectors(reg: np.ndarray) -> np.ndarray:
-    """Per region, the angular sector (centre, half width; rad, angle = atan2(z, y)) that its (y, z) rectangle
-    covers around the closing axis at roll 0; half width pi when the rectangle holds the axis."""
-    out = np.zeros((len(reg), 2))
-    for r, row in enumerate(reg):
-        hy, zlo, zhi = row[0], row[1], row[2]
-        if zlo <= 0.0 <= zhi:
-            out[r] = (0.0, np.pi)
-            continue
-        ang = np.arctan2([zlo, zlo, zhi, zhi], [-hy, hy, -hy, hy])
-        ref = ang[0]
-        d = (ang - ref + np.pi) % (2 * np.pi) - np.pi
-        lo, hi = ref + d.min(), ref + d.max()
-        out[r] = (0.5 * (lo + hi), 0.5 * (hi - lo))
-    return out
-
-
 @njit(cache=True, inline="always", error_model="numpy")
-def _wrap(a):
-    return a - 2.0 * np.pi * np.floor((a + np.pi) / (2.0 * np.pi))
-
-
-@njit(cache=True, error_model="numpy")
-def _triangle_polar(v):
-    """(r_min, r_max, angle centre, angle half width) of triangle v's projection onto the (y, z) plane, seen from
-    the axis (the origin); the half width is pi when the projection holds the origin."""
-    y0, z0, y1, z1, y2, z2 = v[0, 1], v[0, 2], v[1, 1], v[1, 2], v[2, 1], v[2, 2]
-    r_max = np.sqrt(max(y0 * y0 + z0 * z0, y1 * y1 + z1 * z1, y2 * y2 + z2 * z2))
-    c0 = y0 * z1 - z0 * y1
-    c1 = y1 * z2 - z1 * y2
-    c2 = y2 * z0 - z2 * y0
-    if (c0 >= 0.0 and c1 >= 0.0 and c2 >= 0.0) or (c0 <= 0.0 and c1 <= 0.0 and c2 <= 0.0):
-        return 0.0, r_max, 0.0, np.pi
-    r_min = np.inf
-    for e in range(3):
-        ay, az = v[e, 1], v[e, 2]
-        by, bz = v[(e + 1) % 3, 1], v[(e + 1) % 3, 2]
-        dy, dz = by - ay, bz - az
-        ll = dy * dy + dz * dz
-        t = 0.0 if ll <= 0.0 else min(max(-(ay * dy + az * dz) / ll, 0.0), 1.0)
-        qy, qz = ay + t * dy, az + t * dz
-        r_min = min(r_min, np.sqrt(qy * qy + qz * qz))
-    a0 = np.arctan2(z0, y0)
-    d1 = _wrap(np.arctan2(z1, y1) - a0)
-    d2 = _wrap(np.arctan2(z2, y2) - a0)
-    lo = min(0.0, d1, d2)
-    hi = max(0.0, d1, d2)
-    return r_min, r_max, a0 + 0.5 * (lo + hi), 0.5 * (hi - lo)
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _roll_hits(live, R, psi, ang_c, ang_h, sec_c, sec_h):
-    """The rolls of `live` at which an angular interval (ang_c +- ang_h, roll-0 frame) meets a region's sector."""
-    if ang_h >= np.pi or sec_h >= np.pi:
-        return live
-    out = np.uint64(0)
-    lim = ang_h + sec_h + 1e-9
-    for k in range(R):
-        bit = np.uint64(1) << np.uint64(k)
-        if live & bit and abs(_wrap(ang_c - psi[k] - sec_c)) <= lim:
-            out |= bit
-    return out
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _node_meets_box(nodes, k, x, y0, z0, ax, ay, az, yx, yy, yz, zx, zy, zz, c, s, bc, be):
-    """May node k's axis-aligned box meet the region box (centre bc, half extents be in the roll's grasp frame)?
-    Separating-axis test on the region's three axes and the world's three (the nine cross axes are left out: a
-    node that passes is only descended into)."""
+def _node_meets_box(nodes, k, x, y0, z0, ax, ay, az, rot, rl, c, s, bc, be):
+    """May node k's axis-aligned box meet the region box (centre bc, half extents be in the grasp frame of roll rl,
+    whose Y and Z in the object frame are rot[rl])? Separating-axis test on the region's three axes and the
+    world's three (the nine cross axes are left out: a node that passes is only descended into)."""
     ex, ey, ez = nodes[k, 4], nodes[k, 5], nodes[k, 6]
-    # the roll's Y and Z in the object frame
-    Yx, Yy, Yz = c * yx + s * zx, c * yy + s * zy, c * yz + s * zz
-    Zx, Zy, Zz = -s * yx + c * zx, -s * yy + c * zy, -s * yz + c * zz
+    Yx, Yy, Yz, Zx, Zy, Zz = rot[rl, 0], rot[rl, 1], rot[rl, 2], rot[rl, 3], rot[rl, 4], rot[rl, 5]
     # the node's centre relative to the region's centre, along the region's axes
     dX = x - bc[0]
     dY = y0 * c + z0 * s - bc[1]
@@ -422,7 +357,7 @@ def _node_meets_box(nodes, k, x, y0, z0, ax, ay, az, yx, yy, yz, zx, zy, zz, c, 
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _mesh_kernel(M, A, Wd, inside, free, T, nodes, children, reg, sectors, model_f, psi, cos_k, sin_k, switch):
+def _mesh_kernel(M, A, Wd, inside, free, T, nodes, children, reg, model_f, cos_k, sin_k, switch):
     n = M.shape[0]
     R = cos_k.shape[0]
     nreg = reg.shape[0]
@@ -434,6 +369,7 @@ def _mesh_kernel(M, A, Wd, inside, free, T, nodes, children, reg, sectors, model
         boxes_e = np.empty((3, 3))
         v = np.empty((3, 3))
         w = np.empty((3, 3))
+        rot = np.empty((R, 6))
         stack = np.empty(128, dtype=np.int64)
         masks = np.empty(128, dtype=np.uint64)
         for i in range(ch * _CHUNK, min(n, (ch + 1) * _CHUNK)):
@@ -445,6 +381,10 @@ def _mesh_kernel(M, A, Wd, inside, free, T, nodes, children, reg, sectors, model
                 continue
             ax, ay, az = A[i, 0], A[i, 1], A[i, 2]
             yx, yy, yz, zx, zy, zz = _basis(ax, ay, az, switch)
+            for rl in range(R):
+                c, s = cos_k[rl], sin_k[rl]
+                rot[rl, 0], rot[rl, 1], rot[rl, 2] = c * yx + s * zx, c * yy + s * zy, c * yz + s * zz
+                rot[rl, 3], rot[rl, 4], rot[rl, 5] = -s * yx + c * zx, -s * yy + c * zy, -s * yz + c * zz
             _x_ranges(xr, inside[i], Wd[i], model_f)
             # the boxes in the roll's grasp frame (centre, half extents) and their x ranges
             for r in range(nreg):
@@ -487,27 +427,10 @@ def _mesh_kernel(M, A, Wd, inside, free, T, nodes, children, reg, sectors, model
                         continue
                     for rl in range(R):
                         bit = np.uint64(1) << np.uint64(rl)
-                        if not (live & bit) or (hit & bit):
+                        if not (live & bit & ~hit):
                             continue
                         if _node_meets_box(
-                            nodes,
-                            k,
-                            x,
-                            y0,
-                            z0,
-                            ax,
-                            ay,
-                            az,
-                            yx,
-                            yy,
-                            yz,
-                            zx,
-                            zy,
-                            zz,
-                            cos_k[rl],
-                            sin_k[rl],
-                            boxes_c[r],
-                            boxes_e[r],
+                            nodes, k, x, y0, z0, ax, ay, az, rot, rl, cos_k[rl], sin_k[rl], boxes_c[r], boxes_e[r]
                         ):
                             hit |= bit
                     if hit == live:
@@ -532,20 +455,12 @@ def _mesh_kernel(M, A, Wd, inside, free, T, nodes, children, reg, sectors, model
                         v[c, 2] = px * zx + py * zy + pz * zz
                     tx0 = min(v[0, 0], v[1, 0], v[2, 0])
                     tx1 = max(v[0, 0], v[1, 0], v[2, 0])
-                    polar = False
-                    r_min = r_max = ang_c = ang_h = 0.0
                     for r in range(nreg):
                         if tx1 < rx[r, 0] or tx0 > rx[r, 1]:
                             continue
-                        if not polar:
-                            r_min, r_max, ang_c, ang_h = _triangle_polar(v)
-                            polar = True
-                        if r_max < reg[r, 3] or r_min > reg[r, 4]:
-                            continue
-                        rolls = _roll_hits(hit & ~blocked, R, psi, ang_c, ang_h, sectors[r, 0], sectors[r, 1])
                         for rl in range(R):
                             bit = np.uint64(1) << np.uint64(rl)
-                            if not (rolls & bit) or (blocked & bit):
+                            if not (hit & bit & ~blocked):
                                 continue
                             ck, sk = cos_k[rl], sin_k[rl]
                             for c in range(3):
