@@ -29,6 +29,7 @@ The markdown goes between the `bench_hold` markers of `--out` (appended when abs
 from __future__ import annotations
 
 import argparse
+import hashlib
 import inspect
 import json
 import os
@@ -138,6 +139,7 @@ def run_part(label: str, part, args, members) -> dict:
     row["prepare_s"] = time.perf_counter() - t0
     row["geometry"] = f"{sim.geometry} ({sim.pieces})"
     paper_gs = None
+    cache: dict = {}
     for config in args.configs:
         kw = config_kwargs(config, args.mass)
         if kw is None:
@@ -163,17 +165,25 @@ def run_part(label: str, part, args, members) -> dict:
             out["validation"] = {k: v.get(k) for k in ("tested", "succeeded", "repaired", "simulated")}
         if len(idx):
             t0 = time.perf_counter()
-            grid = physics.simulate_perturbed(
-                sim,
-                _poses(c, idx),
-                c.widths[idx],
-                [physics.NOMINAL, *members],
-                seed=0,
-                keys=idx,
-                workers=args.workers,
-                inside=c.inside[idx],
-            )
+            # a grasp's outcome depends only on the part, its pose, width, key and the seed: configurations with the
+            # same candidate set (hold and validate) share the simulations of the grasps they both export
+            cset = hashlib.sha1(np.ascontiguousarray(c.contacts).tobytes()).hexdigest()
+            todo = np.array([i for i in idx if (cset, int(i)) not in cache], dtype=np.int64)
+            if len(todo):
+                new = physics.simulate_perturbed(
+                    sim,
+                    _poses(c, todo),
+                    c.widths[todo],
+                    [physics.NOMINAL, *members],
+                    seed=0,
+                    keys=todo,
+                    workers=args.workers,
+                    inside=c.inside[todo],
+                )
+                cache.update({(cset, int(i)): g for i, g in zip(todo, new, strict=True)})
+            grid = [cache[(cset, int(i))] for i in idx]
             out["sim_s"] = time.perf_counter() - t0
+            out["simulated_new"] = len(todo)
             ok = np.array([[r.success for r in g] for g in grid], dtype=bool)  # (k, 1 + members)
             out["nominal"] = int(ok[:, 0].sum())
             out["all"] = int(ok.all(axis=1).sum())
@@ -250,7 +260,7 @@ def pct(a, b):
 
 
 def markdown(rows, members, args, wall_s) -> str:
-    cmd = "PYTHONUNBUFFERED=1 .venv/bin/python bench/bench_hold.py" + (
+    cmd = args.command or "PYTHONUNBUFFERED=1 .venv/bin/python bench/bench_hold.py" + (
         f" --parts {' '.join(args.parts)}" if args.parts else ""
     )
     lines = [
@@ -335,14 +345,14 @@ def markdown(rows, members, args, wall_s) -> str:
         (
             "confusion",
             "the nominal simulation",
-            f"{args.sample} random candidates per part of the `paper` configuration (seeded); held = held in the "
-            "nominal simulation.",
+            f"A seeded random sample of the `paper` configuration's candidates per part ({args.sample} unless the "
+            "`sampled` column says otherwise); held = held in the nominal simulation.",
         ),
         (
             "confusion_perturbed",
             "the perturbed simulations",
-            f"The first {args.sample_perturbed} of those candidates per part; held = held under the nominal "
-            "simulation and every member of the perturbation set.",
+            f"The first {args.sample_perturbed} of that sample per part (unless `sampled` says otherwise); held = "
+            "held under the nominal simulation and every member of the perturbation set.",
         ),
     ):
         conf = [r for r in rows if key in r]
@@ -404,6 +414,7 @@ def main() -> None:
     ap.add_argument("--json", help="also write the raw rows here")
     ap.add_argument("--render", help="only write the markdown of the rows (--json) of an earlier run")
     ap.add_argument("--wall", type=float, default=None, help="with --render: the earlier run's wall time (s)")
+    ap.add_argument("--command", help="with --render: the command line(s) of the earlier run, for the text")
     args = ap.parse_args()
     members = physics.perturbation_set(0)
     earlier = {r["part"]: r for r in json.loads(Path(args.merge).read_text())} if args.merge else {}
