@@ -18,8 +18,8 @@ part the candidates are generated once, then k = k1 * k2 grasps are selected by
 
 Reported per selection: coverage at (1 cm, 30 deg) and (2 cm, 45 deg), the smallest pairwise combined distance
 max(dp / 1 cm, angle / 30 deg) (below 1: two selected grasps cover each other), the mean quality score, and, with
-simulation, the share of the k grasps that MuJoCo holds through the lift and shake (physics.py defaults: 20 N per
-finger, no repair) at the exported pose (the roll choose_roll picks). Masses follow the material each part stands for
+simulation, the share of the k grasps that MuJoCo holds through the lift and shake (20 N per finger, GRIP_FORCE;
+no repair) at the exported pose (the roll choose_roll picks). Masses follow the material each part stands for
 (`density_of`): the example parts steel (7850 kg/m^3), the T-LESS parts plastic (1200), the trimesh machined parts
 aluminium (2700), the YCB objects their published masses (mustard bottle 0.603 kg, sugar box 0.514 kg, soup can
 0.349 kg) over their closed volumes. A second table times 64 simulated grasps with
