@@ -18,10 +18,11 @@ import contextlib
 import logging
 import os
 import threading
-from collections import OrderedDict
 from collections.abc import Callable
 from concurrent.futures import Future, ProcessPoolExecutor
 from typing import Any
+
+from .cache import SizedLRU
 
 __all__ = ["PreviewCache", "PreviewRenderer", "PreviewsBusy", "render_png"]
 
@@ -37,33 +38,11 @@ class PreviewsBusy(Exception):  # noqa: N818 - a state, answered as a 503 proble
     """Every render process is busy and the waiting line is full."""
 
 
-class PreviewCache:
-    """PNG bytes by (grasp set id, width, height), least recently used evicted first."""
+class PreviewCache(SizedLRU[bytes]):
+    """PNG bytes by (grasp set id, width, height), least recently used evicted first (the API's one LRU, cache.py)."""
 
-    def __init__(self, max_bytes: int) -> None:
-        self.max_bytes = max_bytes
-        self._items: OrderedDict[tuple[int, int, int], bytes] = OrderedDict()
-        self._size = 0
-        self._lock = threading.Lock()
-
-    def get(self, key: tuple[int, int, int]) -> bytes | None:
-        with self._lock:
-            data = self._items.get(key)
-            if data is not None:
-                self._items.move_to_end(key)
-            return data
-
-    def put(self, key: tuple[int, int, int], data: bytes) -> None:
-        if len(data) > self.max_bytes:
-            return
-        with self._lock:
-            if key in self._items:
-                return
-            self._items[key] = data
-            self._size += len(data)
-            while self._size > self.max_bytes:
-                _, old = self._items.popitem(last=False)
-                self._size -= len(old)
+    def put(self, key: tuple[int, int, int], data: bytes) -> None:  # type: ignore[override]
+        super().put(key, data, len(data))
 
 
 def _init_render_process() -> None:
