@@ -23,6 +23,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from graspgen.errors import GraspgenError
 from services.common.db import is_disconnect, is_unavailable
+from services.common.jobs import problem
 from services.common.storage import StorageError
 
 __all__ = [
@@ -103,13 +104,7 @@ def problem_response(
     headers: dict[str, str] | None = None,
     **extra: Any,
 ) -> JSONResponse:
-    body: dict[str, Any] = {
-        "type": f"urn:graspgen:problem:{code}",
-        "title": title or _TITLES.get(status, "Error"),
-        "status": status,
-        "detail": detail,
-        "code": code,
-    }
+    body = problem(code, title or _TITLES.get(status, "Error"), detail, status=status)
     if instance:
         body["instance"] = instance
     body.update(extra)

@@ -44,7 +44,7 @@ def params_key(params: dict[str, Any], derived_from: int | None) -> str:
 
 
 def problem(code: str, title: str, detail: str, *, status: int = 422, **extra: Any) -> dict[str, Any]:
-    """RFC 9457 fields for a job's `error` (the same shape the API returns for a failed request)."""
+    """RFC 9457 fields: a job's `error`, and the body of every problem response of the API (api/problems.py)."""
     return {
         "type": f"urn:graspgen:problem:{code}",
         "title": title,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -10,7 +11,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-GRAPSGEN = str(Path(sys.executable).with_name("graspgen"))
+#: the CLI of whatever `graspgen` package is first on the path
+CLI = [sys.executable, "-c", "import sys; from graspgen.cli import main; sys.exit(main())"]
 #: modules whose kernels a generate job, a re-cluster or a preview runs
 MODULES = ("antipodal", "collision", "clustering", "sampling", "quality", "coverage", "render", "parts")
 
@@ -22,10 +24,24 @@ def _cache_files(root: Path) -> dict[str, float]:
 
 
 def test_warmup_fills_an_empty_cache_and_a_job_afterwards_compiles_nothing(tmp_path):
+    # a snapshot of the package: numba keys its cache on each source file's path and mtime, and this working tree
+    # may be edited while the test runs; both processes import the snapshot
+    src = tmp_path / "src"
+    shutil.copytree(ROOT / "graspgen", src / "graspgen", ignore=shutil.ignore_patterns("__pycache__"))
     cache = tmp_path / "numba-cache"
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
-    run = subprocess.run([GRAPSGEN, "warmup"], env=env, capture_output=True, text=True, timeout=900, cwd=ROOT)
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(src)}
+    run = subprocess.run([*CLI, "warmup"], env=env, capture_output=True, text=True, timeout=1800, cwd=src)
     assert run.returncode == 0, run.stderr
+    assert (
+        f"{src}/graspgen/warmup.py"
+        in subprocess.run(
+            [sys.executable, "-c", "import graspgen.warmup as w; print(w.__file__)"],
+            env=env,
+            capture_output=True,
+            text=True,
+            cwd=src,
+        ).stdout
+    )
     assert str(cache) in run.stdout and "index files" in run.stdout
     files = _cache_files(cache)
     for module in MODULES:
@@ -36,7 +52,7 @@ def test_warmup_fills_an_empty_cache_and_a_job_afterwards_compiles_nothing(tmp_p
     out = tmp_path / "grasps.json"
     job = subprocess.run(
         [
-            GRAPSGEN,
+            *CLI,
             "generate",
             str(ROOT / "tests" / "reliability" / "corpus" / "meshes" / "good_box_mm.stl"),
             "--units",
@@ -52,8 +68,8 @@ def test_warmup_fills_an_empty_cache_and_a_job_afterwards_compiles_nothing(tmp_p
         env=env,
         capture_output=True,
         text=True,
-        timeout=300,
-        cwd=ROOT,
+        timeout=600,
+        cwd=src,
     )
     assert job.returncode == 0, job.stderr
     assert out.is_file()
