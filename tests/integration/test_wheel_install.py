@@ -41,8 +41,8 @@ def wheel_venv(tmp_path_factory) -> Path:
     for name in ("pyproject.toml", "README.md", "LICENSE"):
         shutil.copy(ROOT / name, src / name)
     ignore = shutil.ignore_patterns("__pycache__", "*.pyc", "*.nbi", "*.nbc")
-    for name in ("graspgen", "services"):
-        shutil.copytree(ROOT / name, src / name, ignore=ignore)
+    for name in ("graspgen", "services", "migrations"):  # what the Dockerfile copies (services/migrations links there)
+        shutil.copytree(ROOT / name, src / name, ignore=ignore, symlinks=True)
     dist = work / "dist"
     subprocess.run(
         [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--disable-pip-version-check", "-w", str(dist), "."],
