@@ -405,19 +405,37 @@ def within_spread(
     """Criterion (c) with a position tolerance: (m,) bool, true where both contacts stay inside the cone for every
     surface normal near them, i.e. contact angle + the point's normal spread (rad, per point) <= the half-angle.
 
-    Only pairs with a contact whose spread is not zero are evaluated; the rest passed (c) already."""
-    ok = np.ones(len(i), dtype=bool)
-    near = (spread_rad[i] > 0) | (spread_rad[j] > 0)
-    if not near.any():
-        return ok
-    a, b, ins = i[near], j[near], inside[near]
-    d = points[b] - points[a]
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    sign = np.where(ins, 1.0, -1.0)
-    ang0 = np.arccos(np.clip(sign * np.sum(normals[a] * d, axis=1), -1.0, 1.0)) + spread_rad[a]
-    ang1 = np.arccos(np.clip(-sign * np.sum(normals[b] * d, axis=1), -1.0, 1.0)) + spread_rad[b]
-    ok[near] = np.maximum(ang0, ang1) <= half_angle_rad
+    Only pairs with a contact whose spread is not zero are evaluated (compiled); the rest passed (c) already."""
+    ok = np.empty(len(i), dtype=np.bool_)
+    if len(i):
+        _within_spread_kernel(
+            np.ascontiguousarray(points, dtype=np.float64),
+            np.ascontiguousarray(normals, dtype=np.float64),
+            np.ascontiguousarray(i, dtype=np.int64),
+            np.ascontiguousarray(j, dtype=np.int64),
+            np.ascontiguousarray(inside, dtype=np.bool_),
+            np.ascontiguousarray(spread_rad, dtype=np.float64),
+            float(half_angle_rad),
+            ok,
+        )
     return ok
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _within_spread_kernel(P, N, I, J, inside, spread, half, ok):
+    for k in prange(I.shape[0]):
+        a, b = I[k], J[k]
+        if spread[a] <= 0.0 and spread[b] <= 0.0:
+            ok[k] = True
+            continue
+        dx, dy, dz = P[b, 0] - P[a, 0], P[b, 1] - P[a, 1], P[b, 2] - P[a, 2]
+        inv = 1.0 / np.sqrt(dx * dx + dy * dy + dz * dz)
+        sign = 1.0 if inside[k] else -1.0
+        c0 = sign * (N[a, 0] * dx + N[a, 1] * dy + N[a, 2] * dz) * inv
+        c1 = -sign * (N[b, 0] * dx + N[b, 1] * dy + N[b, 2] * dz) * inv
+        ang0 = np.arccos(min(1.0, max(-1.0, c0))) + spread[a]
+        ang1 = np.arccos(min(1.0, max(-1.0, c1))) + spread[b]
+        ok[k] = max(ang0, ang1) <= half
 
 
 def friction_margin_deg(

@@ -356,3 +356,25 @@ def test_cli_mass_and_hold_options(tmp_path, capsys):
         assert main([*base, *extra, "--out", str(bad)]) == 2, extra
         assert not bad.exists()
         assert capsys.readouterr().err.strip().count("\n") == 0
+
+
+def test_within_spread_equals_a_plain_reference():
+    rng = np.random.default_rng(11)
+    n, m = 300, 5000
+    pts = rng.normal(size=(n, 3)) * 0.02
+    nrm = rng.normal(size=(n, 3))
+    nrm /= np.linalg.norm(nrm, axis=1)[:, None]
+    spread = np.where(rng.random(n) < 0.5, 0.0, rng.uniform(0, 0.3, n))
+    i = rng.integers(0, n, m)
+    j = (i + rng.integers(1, n, m)) % n
+    ins = rng.random(m) < 0.3
+    half = cone_half_angle_rad(0.8, 1.2)
+    d = pts[j] - pts[i]
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    sign = np.where(ins, 1.0, -1.0)
+    a0 = np.arccos(np.clip(sign * np.sum(nrm[i] * d, axis=1), -1, 1)) + spread[i]
+    a1 = np.arccos(np.clip(-sign * np.sum(nrm[j] * d, axis=1), -1, 1)) + spread[j]
+    expect = (np.maximum(a0, a1) <= half) | ((spread[i] == 0) & (spread[j] == 0))
+    got = within_spread(pts, nrm, i, j, ins, spread, half)
+    np.testing.assert_array_equal(got, expect)
+    assert 0 < got.sum() < m
