@@ -31,7 +31,7 @@ import numpy as np
 from numba import njit, prange
 from scipy.spatial import cKDTree
 
-from .sampling import cell_grid
+from .sampling import cell_grid, cell_runs
 
 __all__ = [
     "TERMS",
@@ -158,18 +158,16 @@ def _flatness_kernel(P, N, cells, cell_start, dims, r2, out):
     for i in prange(P.shape[0]):
         total = 0.0
         count = 0
-        ci, cj, ck = cells[i, 0], cells[i, 1], cells[i, 2]
-        for a in range(max(ci - 1, 0), min(ci + 2, dims[0])):
-            for b in range(max(cj - 1, 0), min(cj + 2, dims[1])):
-                col = (a * dims[1] + b) * dims[2]
-                for j in range(cell_start[col + max(ck - 1, 0)], cell_start[col + min(ck + 2, dims[2])]):
-                    dx = P[j, 0] - P[i, 0]
-                    dy = P[j, 1] - P[i, 1]
-                    dz = P[j, 2] - P[i, 2]
-                    if dx * dx + dy * dy + dz * dz <= r2:
-                        dot = N[j, 0] * N[i, 0] + N[j, 1] * N[i, 1] + N[j, 2] * N[i, 2]
-                        total += min(max(dot, 0.0), 1.0)
-                        count += 1
+        runs = np.empty((9, 2), dtype=np.int64)
+        for r in range(cell_runs(cells, cell_start, dims, i, runs)):
+            for j in range(runs[r, 0], runs[r, 1]):
+                dx = P[j, 0] - P[i, 0]
+                dy = P[j, 1] - P[i, 1]
+                dz = P[j, 2] - P[i, 2]
+                if dx * dx + dy * dy + dz * dz <= r2:
+                    dot = N[j, 0] * N[i, 0] + N[j, 1] * N[i, 1] + N[j, 2] * N[i, 2]
+                    total += min(max(dot, 0.0), 1.0)
+                    count += 1
         out[i] = total / count
 
 

@@ -339,3 +339,18 @@ def cell_grid(points: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, 
     cell_start = np.zeros(int(np.prod(dims)) + 1, dtype=np.int64)
     np.cumsum(np.bincount(flat, minlength=int(np.prod(dims))), out=cell_start[1:])
     return order, idx[order], cell_start, dims.astype(np.int64)
+
+
+@numba.njit(cache=True, inline="always")
+def cell_runs(cells, cell_start, dims, i, runs):
+    """The point ranges (into `cell_grid`'s order) of point i's cell and the 26 around it, as up to 9 runs
+    (start, stop) written into `runs` (9, 2) int64 (a run per column of cells); returns the number of runs."""
+    ci, cj, ck = cells[i, 0], cells[i, 1], cells[i, 2]
+    n = 0
+    for a in range(max(ci - 1, 0), min(ci + 2, dims[0])):
+        for b in range(max(cj - 1, 0), min(cj + 2, dims[1])):
+            col = (a * dims[1] + b) * dims[2]
+            runs[n, 0] = cell_start[col + max(ck - 1, 0)]
+            runs[n, 1] = cell_start[col + min(ck + 2, dims[2])]
+            n += 1
+    return n
