@@ -59,8 +59,11 @@ def test_warmup_fills_an_empty_cache_and_a_job_afterwards_compiles_nothing(tmp_p
             "mm",
             "--gripper",
             str(ROOT / "examples" / "pgn-80.json"),
+            # enough candidates for the parallel cluster assignment, and criterion (e) on
             "--points",
-            "1500",
+            "8000",
+            "--mass",
+            "0.1",
             "--out",
             str(out),
             "--quiet",
