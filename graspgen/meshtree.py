@@ -53,18 +53,10 @@ class MeshTree:
         return len(self.triangles)
 
 
-def build_tree(vertices: np.ndarray, faces: np.ndarray, *, max_edge: float | None = None) -> MeshTree:
-    """A tree over the mesh's non-degenerate triangles. `vertices` (v, 3) float64 metres, `faces` (m, 3) int.
-
-    `max_edge` (m, default none): triangles with a longer edge are split into coplanar pieces (the surface stays
-    the same). Measured on the thick ring: splitting to 1/25 or 1/100 of the diagonal made the box queries 4-5x
-    slower (more triangles near each box), so the default keeps the mesh's own triangles."""
-    import trimesh
-
+def build_tree(vertices: np.ndarray, faces: np.ndarray) -> MeshTree:
+    """A tree over the mesh's non-degenerate triangles. `vertices` (v, 3) float64 metres, `faces` (m, 3) int."""
     V = np.asarray(vertices, dtype=np.float64)
     F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    if len(F) and max_edge is not None and max_edge > 0:
-        V, F = trimesh.remesh.subdivide_to_size(V, F, max_edge=max_edge, max_iter=8)
     tri = V[F]
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     area2 = np.linalg.norm(n, axis=1)

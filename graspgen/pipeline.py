@@ -222,11 +222,13 @@ def generate(
         center_of_mass=com,
         hold_margin=margins,
     )
+    # the mesh-exact check ran after (e): what it removed counts as collision, with the point test's
+    n_mesh = n_point_free - n_hold - len(cands)
     rejected = {
         "stroke": plan.rejected_stroke,
         "outside": plan.rejected_outside,
         "friction": plan.rejected_friction + n_tolerance,
-        "collision": plan.accepted - n_tolerance - n_point_free + (n_point_free - n_hold - len(cands)),
+        "collision": plan.accepted - n_tolerance - n_point_free + n_mesh,
         "hold": n_hold,
     }
     stats: dict[str, Any] = {
@@ -242,13 +244,13 @@ def generate(
         "exact": {
             "friction_position_tolerance": n_tolerance,
             "collision_mesh_rolls": n_mesh_rolls,
-            "collision_mesh_candidates": n_point_free - n_hold - len(cands),
+            "collision_mesh_candidates": n_mesh,
         },
     }
     if hold_on:
         stats["hold"] = {
             "mass_kg": mass,
-            "load_n": _hold.hold_load(mass, params.accel),
+            "load_n": load,
             "grip_force": spec.grip_force,
             "friction": mu,
             "center_of_mass": [float(v) for v in com],
