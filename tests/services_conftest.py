@@ -21,6 +21,36 @@ REDIS_URL = os.environ.get("GRASPGEN_TEST_REDIS_URL", "redis://127.0.0.1:6379")
 _RUN = uuid.uuid4().hex[:8]
 
 
+def store_grasp_set_row(session, storage, ov, gv, version: int, export: dict) -> int:  # type: ignore[no-untyped-def]
+    """A grasp-set row for object version `ov` and gripper version `gv` with `export` stored as its blob, as the
+    worker stores a finished set (no candidates, no grasps); returns its id. The caller refreshes the catalogue."""
+    import json
+
+    from services.common.jobs import params_key
+    from services.common.models import GraspSet
+
+    blob = storage.put_bytes(json.dumps(export).encode())
+    params = export["params"]
+    gs = GraspSet(
+        object_id=ov.object_id,
+        gripper_id=gv.gripper_id,
+        version=version,
+        object_version_id=ov.id,
+        gripper_version_id=gv.id,
+        params=params,
+        params_key=params_key(params, None),
+        job_id=uuid.uuid4(),
+        stats={},
+        grasp_count=0,
+        export_key=blob.key,
+        export_sha256=blob.sha256,
+        export_size=blob.size,
+    )
+    session.add(gs)
+    session.flush()
+    return gs.id
+
+
 def worker_id() -> str:
     return os.environ.get("PYTEST_XDIST_WORKER", "main")
 
@@ -366,12 +396,10 @@ def seed_grasp_sets(
     Every object gets an object version and `version_of[name]` (default 1) more grasp sets for `gripper`, numbered
     after any it has; object and gripper are registered through the API first. Returns name -> new ids, oldest first.
     """
-    import json
 
     from sqlalchemy import func, select
 
     from services.common import catalogue
-    from services.common.jobs import params_key
     from services.common.models import GraspSet, Gripper, GripperVersion, ObjectModel, ObjectVersion
 
     assert service.gripper(gripper).status_code in (200, 201)
@@ -402,25 +430,7 @@ def seed_grasp_sets(
                     "stats": {"candidates": 0},
                     "grasps": [],
                 }
-                blob = state.storage.put_bytes(json.dumps(export).encode())
-                gs = GraspSet(
-                    object_id=obj.id,
-                    gripper_id=g.id,
-                    version=v,
-                    object_version_id=ov.id,
-                    gripper_version_id=gv.id,
-                    params=params,
-                    params_key=params_key(params, None),
-                    job_id=uuid.uuid4(),
-                    stats={},
-                    grasp_count=0,
-                    export_key=blob.key,
-                    export_sha256=blob.sha256,
-                    export_size=blob.size,
-                )
-                s.add(gs)
-                s.flush()
-                ids.append(gs.id)
+                ids.append(store_grasp_set_row(s, state.storage, ov, gv, v, export))
             catalogue.refresh(s, object_id=obj.id, gripper_id=g.id)  # as the worker does when it stores a set
             out[name] = ids
     return out

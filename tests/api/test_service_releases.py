@@ -3,17 +3,14 @@ change number, and two concurrent catalogue changes on PostgreSQL."""
 
 from __future__ import annotations
 
-import json
 import threading
 import time
-import uuid
 
 import pytest
-from services_conftest import box_stl, slug
+from services_conftest import box_stl, slug, store_grasp_set_row
 from sqlalchemy import select, text
 
 from services.common import catalogue
-from services.common.jobs import params_key
 from services.common.models import GraspSet, Gripper, GripperVersion, ObjectModel, ObjectVersion
 
 pytestmark = pytest.mark.integration
@@ -48,27 +45,10 @@ def add_set(svc, obj: str, grip: str, *, ov: int | None = None, gv: int | None =
             ).scalar_one_or_none()
             or 0
         ) + 1
-        params = {"points": 1000 + n, "seed": n}
-        blob = state.storage.put_bytes(json.dumps({"format": "graspgen.grasp_set/1", "params": params}).encode())
-        gs = GraspSet(
-            object_id=o.id,
-            gripper_id=g.id,
-            version=n,
-            object_version_id=o_v.id,
-            gripper_version_id=g_v.id,
-            params=params,
-            params_key=params_key(params, None),
-            job_id=uuid.uuid4(),
-            stats={},
-            grasp_count=0,
-            export_key=blob.key,
-            export_sha256=blob.sha256,
-            export_size=blob.size,
-        )
-        s.add(gs)
-        s.flush()
+        export = {"format": "graspgen.grasp_set/1", "params": {"points": 1000 + n, "seed": n}}
+        gs_id = store_grasp_set_row(s, state.storage, o_v, g_v, n, export)
         catalogue.refresh(s, object_id=o.id, gripper_id=g.id)
-        return gs.id
+        return gs_id
 
 
 def pair(svc, grip: str = "", obj: str = "") -> tuple[str, str]:
