@@ -376,6 +376,29 @@ def stop_process(proc, timeout: float = 30.0) -> None:  # type: ignore[no-untype
         proc.wait(10)
 
 
+def start_serve(env: dict[str, str], log: Path):  # type: ignore[no-untyped-def]
+    """A real `graspgen serve` on a free port with `env`, its output in `log`: (process, base URL) once it answers
+    /healthz; stopped again if it never does."""
+    import subprocess
+    import sys
+
+    port = free_port()
+    with open(log, "wb") as out:
+        proc = subprocess.Popen(
+            [str(Path(sys.executable).with_name("graspgen")), "serve", "--port", str(port)],
+            env=env,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
+    try:
+        wait_for_log(log, "Uvicorn running", proc)
+        wait_http(f"http://127.0.0.1:{port}/healthz")
+    except Exception:
+        stop_process(proc)
+        raise
+    return proc, f"http://127.0.0.1:{port}"
+
+
 def settings_env(**values: object) -> dict[str, str]:
     """os.environ plus GRASPGEN_* variables for a subprocess.
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,14 +18,13 @@ from services_conftest import (
     PG_URL,
     broker_settings,
     cylinder_stl,
-    free_port,
     redis_cleanup,
     settings_env,
     slug,
+    start_serve,
     stop_process,
     unique_name,
     wait_for_log,
-    wait_http,
     write_tokens_file,
 )
 
@@ -39,24 +37,6 @@ pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.xdist_group
 SMALL = {"points": 800, "k1": 4, "k2": 2}
 FLOOR = [{"point": [0, 0, 0], "normal": [0, 0, 1]}]
 DOWN = {"direction": [0, 0, -1], "max_angle_deg": 60}
-
-
-def _serve(env: dict[str, str], log: Path) -> tuple[subprocess.Popen, str]:
-    port = free_port()
-    with open(log, "wb") as out:
-        proc = subprocess.Popen(
-            [str(Path(sys.executable).with_name("graspgen")), "serve", "--port", str(port)],
-            env=env,
-            stdout=out,
-            stderr=subprocess.STDOUT,
-        )
-    try:
-        wait_for_log(log, "Uvicorn running", proc)
-        wait_http(f"http://127.0.0.1:{port}/healthz")
-    except Exception:
-        stop_process(proc)
-        raise
-    return proc, f"http://127.0.0.1:{port}"
 
 
 @pytest.fixture(scope="module")
@@ -92,7 +72,7 @@ def postgres_stack(pg_schema, tmp_path_factory):
     server = None
     try:
         wait_for_log(root / "worker.log", " ready.", worker)
-        server, url = _serve(settings_env(**values), root / "serve.log")
+        server, url = start_serve(settings_env(**values), root / "serve.log")
         yield url, tokens["writer"]
     finally:
         if server is not None:
@@ -105,7 +85,7 @@ def postgres_stack(pg_schema, tmp_path_factory):
 def embedded_stack(tmp_path_factory):
     """`graspgen serve` with nothing configured: SQLite, local files, jobs in-process, a created admin token."""
     root = tmp_path_factory.mktemp("client-embedded")
-    proc, url = _serve(settings_env(storage_dir=root / "var"), root / "serve.log")
+    proc, url = start_serve(settings_env(storage_dir=root / "var"), root / "serve.log")
     try:
         yield url, (root / "var" / "admin-token").read_text().strip()
     finally:

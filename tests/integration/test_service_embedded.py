@@ -6,7 +6,6 @@ from __future__ import annotations
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import httpx
 import pytest
@@ -14,11 +13,9 @@ from services_conftest import (
     GRIPPER,
     box_stl,
     cylinder_stl,
-    free_port,
     settings_env,
+    start_serve,
     stop_process,
-    wait_for_log,
-    wait_http,
 )
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
@@ -27,21 +24,7 @@ SMALL = {"points": 800, "k1": 4, "k2": 2}
 
 
 def start(storage_dir, log_path):  # type: ignore[no-untyped-def]
-    port = free_port()
-    with open(log_path, "wb") as out:
-        proc = subprocess.Popen(
-            [str(Path(sys.executable).with_name("graspgen")), "serve", "--port", str(port)],
-            env=settings_env(storage_dir=storage_dir),
-            stdout=out,
-            stderr=subprocess.STDOUT,
-        )
-    try:
-        wait_for_log(log_path, "Uvicorn running", proc)
-        wait_http(f"http://127.0.0.1:{port}/healthz")
-    except Exception:
-        stop_process(proc)
-        raise
-    return proc, f"http://127.0.0.1:{port}"
+    return start_serve(settings_env(storage_dir=storage_dir), log_path)
 
 
 def wait_job(c: httpx.Client, job_id: str, timeout: float = 120) -> dict:

@@ -7,11 +7,8 @@ asserted, by bench/bench_isolation.py (docs/benchmarks_service.md).
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import threading
 import time
-from pathlib import Path
 
 import httpx
 import pytest
@@ -19,14 +16,12 @@ from services_conftest import (
     PG_URL,
     Service,
     broker_settings,
-    free_port,
     redis_cleanup,
     seed_grasp_sets,
     settings_env,
     slug,
+    start_serve,
     stop_process,
-    wait_for_log,
-    wait_http,
     write_tokens_file,
 )
 
@@ -34,24 +29,6 @@ pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
 LOOKUPS = 150
 PREVIEW_CLIENTS = 4
-
-
-def _start(env: dict[str, str], log_path: Path) -> tuple[subprocess.Popen, str]:
-    port = free_port()
-    with open(log_path, "wb") as out:
-        proc = subprocess.Popen(
-            [str(Path(sys.executable).with_name("graspgen")), "serve", "--port", str(port)],
-            env=env,
-            stdout=out,
-            stderr=subprocess.STDOUT,
-        )
-    try:
-        wait_for_log(log_path, "Uvicorn running", proc)
-        wait_http(f"http://127.0.0.1:{port}/healthz")
-    except Exception:
-        stop_process(proc)
-        raise
-    return proc, f"http://127.0.0.1:{port}"
 
 
 def _seed(values: dict, tokens: dict[str, str]) -> tuple[str, str, int]:
@@ -76,7 +53,7 @@ def server(request, tmp_path):
     if request.param == "postgres":
         broker = broker_settings()
         values.update(database_url=PG_URL, database_schema=request.getfixturevalue("pg_schema"), **broker)
-    proc, url = _start(settings_env(**values), tmp_path / "serve.log")  # embedded: migrates the SQLite file
+    proc, url = start_serve(settings_env(**values), tmp_path / "serve.log")  # embedded: migrates the SQLite file
     try:
         obj, grip, gs = _seed(values, tokens)
         yield url, tokens, obj, grip, gs
@@ -146,7 +123,7 @@ def test_preview_size_is_capped_and_the_render_queue_is_bounded(tmp_path):
         "preview_queue": 0,
         "preview_max_pixels": 1024 * 1024,
     }
-    proc, url = _start(settings_env(**values), tmp_path / "serve.log")
+    proc, url = start_serve(settings_env(**values), tmp_path / "serve.log")
     try:
         obj, grip, gs = _seed(values, tokens)
         auth = {"Authorization": f"Bearer {tokens['reader']}"}
