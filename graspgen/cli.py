@@ -18,7 +18,7 @@ from typing import Any
 
 from .errors import Cancelled, GraspgenError, InvalidUnitsError
 from .examples import EXAMPLE_GRIPPER
-from .params import HOLD_MODES
+from .params import HOLD_MODES, SELECT_MODES, QualityOptions
 
 __all__ = ["main", "DEMO_GRIPPER"]
 
@@ -47,7 +47,7 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument(
         "--select",
-        choices=("medoid", "best-near-medoid"),
+        choices=SELECT_MODES,
         default="medoid",
         help="medoid (the paper) or the best-scoring member near each medoid (docs/QUALITY.md)",
     )
@@ -175,7 +175,7 @@ def _run_kwargs(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _quality_kwargs(args: argparse.Namespace) -> dict[str, Any]:
-    return dict(select=args.select, validate=args.validate)
+    return {k: getattr(args, k) for k in QualityOptions.JOB_OPTIONS}
 
 
 def _preview_of(mesh_path: str, units: str):
@@ -246,6 +246,7 @@ def _generate(args: argparse.Namespace) -> int:
 
     spec = GripperSpec.load(args.gripper)
     Params(**_run_kwargs(args))  # validate before any heavy work
+    QualityOptions(**_quality_kwargs(args))
     if args.units is None:
         from .parts import read_raw_extents
 

@@ -4,15 +4,26 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, fields
-from typing import Any
+from typing import Any, ClassVar
 
 from .errors import InvalidParameterError
 
-__all__ = ["Params", "Tolerances", "TOLERANCES", "COLLISION_MODES", "HOLD_MODES", "STANDARD_GRAVITY"]
+__all__ = [
+    "Params",
+    "QualityOptions",
+    "Tolerances",
+    "TOLERANCES",
+    "COLLISION_MODES",
+    "HOLD_MODES",
+    "SELECT_MODES",
+    "STANDARD_GRAVITY",
+]
 
 COLLISION_MODES = ("swept", "paper")
 #: criterion (e): "any" keeps candidates that hold the part against its load in every direction; "off" skips it
 HOLD_MODES = ("any", "off")
+#: which member of each final cluster is exported: the medoid (the paper) or the best-scoring member near it
+SELECT_MODES = ("medoid", "best-near-medoid")
 #: m/s^2
 STANDARD_GRAVITY = 9.81
 
@@ -97,6 +108,53 @@ class Params:
         if mass_kg is not None:
             d["mass_kg"] = mass_kg
         return d
+
+
+@dataclass(frozen=True)
+class QualityOptions:
+    """The options beyond the paper's method (docs/QUALITY.md); the defaults leave the export as the paper's method
+    makes it. `select`: SELECT_MODES; `validate`: simulate every exported grasp in MuJoCo; `repair_limit`: members of
+    its cluster tried in place of a grasp that fails the simulation; `sim_workers`: simulation processes (None: the
+    CPUs)."""
+
+    select: str = "medoid"
+    validate: bool = False
+    repair_limit: int = 4
+    sim_workers: int | None = None
+
+    #: the options a job (HTTP API) and the CLI take; repair_limit and sim_workers are the Python API's only (how a
+    #: worker spends its CPUs is its own business)
+    JOB_OPTIONS: ClassVar[tuple[str, ...]] = ("validate", "select")
+
+    def __post_init__(self) -> None:
+        if self.select not in SELECT_MODES:
+            raise InvalidParameterError(
+                f"select must be one of {', '.join(SELECT_MODES)}, got {self.select!r}", field="select"
+            )
+        if not isinstance(self.validate, bool):
+            raise InvalidParameterError(f"validate must be true or false, got {self.validate!r}", field="validate")
+        r = self.repair_limit
+        if isinstance(r, bool) or not isinstance(r, int) or not 0 <= r <= 64:
+            raise InvalidParameterError(f"repair_limit must be an integer 0..64, got {r!r}", field="repair_limit")
+        w = self.sim_workers
+        if w is not None and (isinstance(w, bool) or not isinstance(w, int) or w < 1):
+            raise InvalidParameterError(f"sim_workers must be a positive integer, got {w!r}", field="sim_workers")
+
+    @property
+    def needs_part(self) -> bool:
+        """Whether a run needs the part beyond stored candidates: to simulate, or to score for the selection."""
+        return self.validate or self.select != "medoid"
+
+    @classmethod
+    def split_job(cls, given: dict[str, Any] | None) -> tuple[dict[str, Any], QualityOptions]:
+        """(the rest, the quality options) of a job's params, the options checked (InvalidParameterError)."""
+        rest = dict(given or {})
+        return rest, cls(**{k: rest.pop(k) for k in cls.JOB_OPTIONS if k in rest})
+
+    def job_dict(self) -> dict[str, Any]:
+        """The job options that differ from the defaults (how a job stores them: `validate` only when true, `select`
+        only when not "medoid")."""
+        return {k: getattr(self, k) for k in self.JOB_OPTIONS if getattr(self, k) != getattr(QualityOptions, k)}
 
 
 def _int(p: Params, name: str, lo: int, hi: int) -> None:

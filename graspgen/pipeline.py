@@ -19,7 +19,7 @@ from .coverage import coverage
 from .errors import InvalidParameterError, InvalidUnitsError
 from .export import Candidates, GraspSet
 from .gripper import GripperSpec
-from .params import Params
+from .params import Params, QualityOptions
 from .parts import Part, load_part
 from .transforms import grasp_frames, roll_angles_rad
 
@@ -88,7 +88,7 @@ def generate(
     the mesh's triangles (meshtree.py).
     """
     report = progress or _noop
-    extras = _Extras.make(select, validate, repair_limit, sim_workers)
+    options = QualityOptions(select=select, validate=validate, repair_limit=repair_limit, sim_workers=sim_workers)
     spec = gripper if isinstance(gripper, GripperSpec) else GripperSpec.from_dict(gripper)
     params = Params(
         points=points,
@@ -120,7 +120,7 @@ def generate(
         part = load_part(mesh_or_path, units=units, name=object_name)
     timings["load"] = time.perf_counter() - t0
     mass, mass_note = _hold.part_mass(part, params.mass_kg, params.density)
-    if extras.validate:
+    if options.validate:
         _check_validation_inputs(mass, spec)
     report("load", 1.0)
 
@@ -183,7 +183,7 @@ def generate(
     t0 = time.perf_counter()
     n_mesh_rolls = 0
     if tree is not None and len(ci):
-        model = _collision.collision_model(spec, params.collision)
+        model = _collision.collision_model(spec, params.collision, reach=_collision.approach_reach(pts))
         d = pts[cj] - pts[ci]
         w = np.linalg.norm(d, axis=1)
         exact = meshtree.mesh_free_rolls(tree, 0.5 * (pts[ci] + pts[cj]), d / w[:, None], w, inside, free, model)
@@ -268,7 +268,7 @@ def generate(
         "sha256": part.sha256,
         "source_units": part.source_units,
     }
-    extras = extras.with_part(part, (pts, nrm), mass)
+    extras = _Extras(options, part, mass, (pts, nrm))
     params = replace(params, hold="any" if hold_on else "off")
     result = _cluster_and_export(cands, obj, spec, params, mu, stats, report, t_all, list(part.warnings), extras)
     if recording is not None:
@@ -286,7 +286,7 @@ def _collide_in_blocks(plan, pts, nrm, spec: GripperSpec, params: Params, timing
     `antipodal_pairs`, and how many pairs the position tolerance removed. Filling the pairs counts as the pairs
     stage, the rest as the collision stage.
     """
-    model = _collision.collision_model(spec, params.collision)
+    model = _collision.collision_model(spec, params.collision, reach=_collision.approach_reach(pts))
     m = plan.accepted
     # progress (and a cancel) at least every m / _COLLISION_BATCHES pairs, within the longest stage
     step = max(-(-m // _COLLISION_BATCHES), 1)
@@ -433,7 +433,7 @@ def recluster(
     from .export import load_candidates
 
     report = progress or _noop
-    extras = _Extras.make(select, validate, repair_limit, sim_workers)
+    options = QualityOptions(select=select, validate=validate, repair_limit=repair_limit, sim_workers=sim_workers)
     t_all = time.perf_counter()
     cands = candidates if isinstance(candidates, Candidates) else load_candidates(candidates)
     spec = GripperSpec.from_dict(previous_export["gripper"])
@@ -454,7 +454,7 @@ def recluster(
     part = None
     if mesh is not None:
         part = mesh if isinstance(mesh, Part) else load_part(mesh, units=units or "m")
-    elif extras.validate or (extras.select != "medoid" and cands.quality_terms is None):
+    elif options.validate or (options.select != "medoid" and cands.quality_terms is None):
         raise InvalidParameterError(
             "validation, and quality selection of candidates stored without quality terms, need the part (mesh=)",
             field="mesh",
@@ -462,13 +462,13 @@ def recluster(
     if mass_kg is not None or density is not None:
         Params(mass_kg=mass_kg, density=density)  # the same checks as generate's
         run_mass, _ = _hold.part_mass(part, mass_kg, density) if part is not None else (mass_kg, None)
-    if extras.validate:
+    if options.validate:
         _check_validation_inputs(run_mass, spec)
     surface = None
-    if extras.select != "medoid" and cands.quality_terms is None:
+    if options.select != "medoid" and cands.quality_terms is None:
         surface = _surface_for_quality(part, params)
         cands = _with_quality(cands, part, *surface, spec, mu, params)
-    extras = extras.with_part(part, surface, run_mass)
+    extras = _Extras(options, part, run_mass, surface)
     result = _cluster_and_export(
         cands, dict(previous_export["object"]), spec, params, mu, stats, report, t_all, [], extras
     )
@@ -496,11 +496,11 @@ def _cluster_and_export(cands, obj, spec, params, mu, stats, report, t_all, warn
     labels = np.asarray(res.labels, dtype=np.int32).reshape(-1, 2)
     medoid_of = medoids.copy()
     score = None
-    if extras.select != "medoid":
+    if extras.options.select != "medoid":
         score = quality.scores(cands.quality_terms)
         medoids = quality.select_best_near_medoid(labels, medoids, clusters, score, cands.midpoints, cands.axes)
         stats["selection"] = {
-            "mode": extras.select,
+            "mode": extras.options.select,
             "replaced": int(np.sum(medoids != medoid_of)),
             "mean_score_medoids": _mean(score[medoid_of]),
             "mean_score_selected": _mean(score[medoids]),
@@ -508,11 +508,11 @@ def _cluster_and_export(cands, obj, spec, params, mu, stats, report, t_all, warn
             "near": {"radius": quality.NEAR.radius, "angle_deg": quality.NEAR.angle_deg},
         }
     sim = None
-    if extras.validate and len(medoids) == 0:
+    if extras.options.validate and len(medoids) == 0:
         from .physics import summarise
 
         stats["validation"] = {**summarise([]), "repaired": 0, "simulated": 0}
-    elif extras.validate:
+    elif extras.options.validate:
         t0 = time.perf_counter()
         medoids, sim = _validate(cands, labels, medoids, clusters, spec, mu, params, extras, stats, report)
         stats["timings_s"]["validate"] = time.perf_counter() - t0
@@ -684,40 +684,13 @@ def _empty_reason(rejected, total, spec: GripperSpec, params: Params, mu: float,
 
 @dataclass(frozen=True)
 class _Extras:
-    """The options beyond the paper's method; the defaults leave the export as the paper's method makes it."""
+    """The quality options and what a run resolved for them: the part (to score and simulate), its mass (kg) for
+    the validation, and its sampled surface (points, normals) for the flatness term when the run has it."""
 
-    select: str = "medoid"
-    validate: bool = False
-    repair_limit: int = 4
-    sim_workers: int | None = None
+    options: QualityOptions = QualityOptions()
     part: Part | None = None
-    #: the part's mass (kg) for the validation
     mass_kg: float | None = None
-    #: the sampled surface (points, normals) of `part`, for the flatness term, when the run has it
     surface: tuple[np.ndarray, np.ndarray] | None = None
-
-    @classmethod
-    def make(cls, select, validate, repair_limit, sim_workers) -> _Extras:
-        if select not in quality.SELECT_MODES:
-            raise InvalidParameterError(
-                f"select must be one of {', '.join(quality.SELECT_MODES)}, got {select!r}", field="select"
-            )
-        if not isinstance(validate, bool):
-            raise InvalidParameterError(f"validate must be true or false, got {validate!r}", field="validate")
-        if isinstance(repair_limit, bool) or not isinstance(repair_limit, int) or not 0 <= repair_limit <= 64:
-            raise InvalidParameterError(
-                f"repair_limit must be an integer 0..64, got {repair_limit!r}", field="repair_limit"
-            )
-        if sim_workers is not None and (
-            isinstance(sim_workers, bool) or not isinstance(sim_workers, int) or sim_workers < 1
-        ):
-            raise InvalidParameterError(
-                f"sim_workers must be a positive integer, got {sim_workers!r}", field="sim_workers"
-            )
-        return cls(select, validate, repair_limit, sim_workers)
-
-    def with_part(self, part: Part | None, surface=None, mass_kg: float | None = None) -> _Extras:
-        return replace(self, part=part, surface=surface, mass_kg=mass_kg)
 
 
 def _mean(values: np.ndarray) -> float | None:
@@ -798,7 +771,7 @@ def _validate(cands, labels, selected, clusters, spec, mu, params, extras: _Extr
         widths[idx],
         seed=params.seed,
         keys=idx,
-        workers=extras.sim_workers,
+        workers=extras.options.sim_workers,
         inside=cands.inside[idx],
     )
     results = run(selected)
@@ -808,14 +781,14 @@ def _validate(cands, labels, selected, clusters, spec, mu, params, extras: _Extr
     alternatives = {}
     mids, axes = cands.midpoints, cands.axes
     for r, res in enumerate(results):
-        if res.success or extras.repair_limit == 0:
+        if res.success or extras.options.repair_limit == 0:
             continue
         t, k = clusters[r]
         members = np.flatnonzero((labels[:, 0] == t) & (labels[:, 1] == k))
         members = members[members != selected[r]]
         ordered, _ = quality.members_by_distance(members, int(selected[r]), mids, axes)
-        alternatives[r] = ordered[: extras.repair_limit]
-    for j in range(extras.repair_limit):
+        alternatives[r] = ordered[: extras.options.repair_limit]
+    for j in range(extras.options.repair_limit):
         rows = [r for r, alts in alternatives.items() if not results[r].success and j < len(alts)]
         if not rows:
             break
@@ -824,7 +797,7 @@ def _validate(cands, labels, selected, clusters, spec, mu, params, extras: _Extr
         for r, m, res in zip(rows, idx, run(idx), strict=True):
             if res.success:
                 final[r], results[r] = m, res
-        report("validate", 0.1 + 0.9 * (j + 1) / extras.repair_limit)
+        report("validate", 0.1 + 0.9 * (j + 1) / extras.options.repair_limit)
     report("validate", 1.0)
     import mujoco
 
@@ -837,7 +810,7 @@ def _validate(cands, labels, selected, clusters, spec, mu, params, extras: _Extr
         **physics.summarise(results),
         "first_pass": physics.summarise(first),
         "repaired": int(np.sum(final != selected)),
-        "repair_limit": extras.repair_limit,
+        "repair_limit": extras.options.repair_limit,
         "simulated": simulated,
         "mass_kg": extras.mass_kg,
         "grip_force": spec.grip_force,

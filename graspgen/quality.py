@@ -31,6 +31,7 @@ import numpy as np
 from numba import njit, prange
 from scipy.spatial import cKDTree
 
+from .params import SELECT_MODES
 from .sampling import cell_grid, cell_runs
 
 __all__ = [
@@ -50,8 +51,6 @@ __all__ = [
 
 #: term names, the columns of `quality_terms`
 TERMS = ("friction", "torque", "flatness")
-#: selection modes: the paper's medoids, or the best-scoring member near each medoid
-SELECT_MODES = ("medoid", "best-near-medoid")
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from graspgen.errors import InvalidGripperError, InvalidParameterError, InvalidUnitsError
 from graspgen.gripper import GripperSpec
-from graspgen.params import Params
+from graspgen.params import Params, QualityOptions
 from graspgen.transforms import (
     grasp_frames,
     matrix_to_quaternion_xyzw,
@@ -108,6 +108,36 @@ def test_params_validation():
     ):
         with pytest.raises(InvalidParameterError):
             Params.from_dict(bad)
+
+
+@pytest.mark.parametrize(
+    "bad, message",
+    [
+        ({"select": "best"}, "select must be one of medoid, best-near-medoid, got 'best'"),
+        ({"select": 3}, "select must be one of medoid, best-near-medoid, got 3"),
+        ({"validate": "yes"}, "validate must be true or false, got 'yes'"),
+        ({"validate": 1}, "validate must be true or false, got 1"),
+        ({"repair_limit": 65}, "repair_limit must be an integer 0..64, got 65"),
+        ({"repair_limit": True}, "repair_limit must be an integer 0..64, got True"),
+        ({"sim_workers": 0}, "sim_workers must be a positive integer, got 0"),
+        ({"sim_workers": 2.0}, "sim_workers must be a positive integer, got 2.0"),
+    ],
+)
+def test_quality_options_refuse_bad_values_naming_the_field(bad, message):
+    with pytest.raises(InvalidParameterError) as err:
+        QualityOptions(**bad)
+    assert err.value.message == message and err.value.field == next(iter(bad))
+
+
+def test_quality_options_of_a_job():
+    rest, q = QualityOptions.split_job({"points": 600, "select": "best-near-medoid", "validate": False})
+    assert rest == {"points": 600} and q == QualityOptions(select="best-near-medoid")
+    assert q.job_dict() == {"select": "best-near-medoid"}  # only what differs from the defaults is stored
+    assert QualityOptions(validate=True).job_dict() == {"validate": True}
+    assert QualityOptions().job_dict() == {} and not QualityOptions().needs_part
+    assert QualityOptions(select="best-near-medoid").needs_part and QualityOptions(validate=True).needs_part
+    # repair_limit and sim_workers are not job options: they stay with the rest (and Params refuses them)
+    assert QualityOptions.split_job({"repair_limit": 2})[0] == {"repair_limit": 2}
 
 
 def test_units():
