@@ -6,7 +6,11 @@ sampled point lies in any box (closed boxes). Modes:
 - `paper`: the paper's test, the outer cuboid around both fingers minus the inner cuboid between them, the
   inner cuboid being longer than the contact distance by `Tolerances.inner_margin` on each side. That is the
   two finger boxes, each shortened by the margin at its contact face.
-- `swept`: the fingers' whole travel from the pre-grasp opening to the contacts, plus the palm box.
+- `swept`: the fingers' whole travel from the pre-grasp opening to the contacts, plus the palm box and, given the
+  part's `reach`, the gripper's approach: the palm's footprint (at least a finger wide) swept along -Z from the
+  fingers' base to `reach` behind it, so that no part of the part lies where the palm, the open fingers or the
+  gripper's body behind them pass on the way in along +Z (a grasp that puts the palm through a ring's eye is not
+  reachable).
 
 Inside grasps mirror the fingers: they sit between the contacts and open outwards to them.
 
@@ -44,7 +48,7 @@ from numba import njit, prange
 from .gripper import GripperSpec
 from .params import TOLERANCES, Tolerances
 
-__all__ = ["MAX_ROLLS", "CollisionModel", "collision_model", "free_rolls", "free_rolls_of_pairs"]
+__all__ = ["MAX_ROLLS", "CollisionModel", "approach_reach", "collision_model", "free_rolls", "free_rolls_of_pairs"]
 
 #: roll masks are one 64-bit word per candidate
 MAX_ROLLS = 64
@@ -84,14 +88,22 @@ class CollisionModel:
     inner_margin: float
 
 
-def collision_model(gripper: GripperSpec, mode: str, tolerances: Tolerances = TOLERANCES) -> CollisionModel:
+def collision_model(
+    gripper: GripperSpec, mode: str, tolerances: Tolerances = TOLERANCES, *, reach: float = 0.0
+) -> CollisionModel:
+    """The regions of criterion (d) for `gripper` in `mode`. `reach` (m; `swept` only): how far behind the fingers'
+    base the approach region extends, at least the largest distance from a grasp's midpoint to any point of the
+    part (the part's bounding-box diagonal does); 0 tests the palm box alone."""
     palm = None
-    if mode == "swept" and gripper.palm_depth > 0:
+    if mode == "swept" and (gripper.palm_depth > 0 or reach > 0):
         z_hi = -gripper.finger_depth / 2
+        half_y = float(gripper.palm_width) / 2 if gripper.palm_depth > 0 else 0.0
+        if reach > 0:  # the approach: the open fingers and the body behind them pass here too
+            half_y = max(half_y, gripper.finger_width / 2)
         palm = (
             gripper.stroke / 2 + gripper.finger_thickness,
-            float(gripper.palm_width) / 2,
-            z_hi - gripper.palm_depth,
+            half_y,
+            z_hi - max(gripper.palm_depth, float(reach)),
             z_hi,
         )
     return CollisionModel(
@@ -105,6 +117,13 @@ def collision_model(gripper: GripperSpec, mode: str, tolerances: Tolerances = TO
         palm=palm,
         inner_margin=tolerances.inner_margin,
     )
+
+
+def approach_reach(points: np.ndarray) -> float:
+    """`reach` for collision_model: the diagonal of the points' bounding box plus 5 %, beyond the largest distance
+    from any midpoint of two of them (or of a mesh they sample finely) to any of them; 0 for no points."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    return 1.05 * float(np.linalg.norm(np.ptp(pts, axis=0))) if len(pts) else 0.0
 
 
 # region constants, one row per region (0 = finger at -x, 1 = finger at +x, 2 = palm)
