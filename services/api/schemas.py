@@ -16,7 +16,7 @@ SLUG = SLUG_PATTERN.pattern
 ID_MAX = 2**31 - 1
 
 _GRIPPER_EXAMPLE = dict(EXAMPLE_GRIPPER)
-_PARAMS_EXAMPLE = {"points": 10000, "safety_factor": 1.5, "rolls": 16, "k1": 16, "k2": 4, "seed": 0}
+PARAMS_EXAMPLE = {"points": 10000, "safety_factor": 1.5, "rolls": 16, "k1": 16, "k2": 4, "seed": 0}
 
 
 class Links(BaseModel):
@@ -143,7 +143,7 @@ def _has_nul(value: Any) -> bool:
     return False
 
 
-class _NoNul(BaseModel):
+class NoNulModel(BaseModel):
     """Requests are stored as PostgreSQL JSONB, which cannot hold a NUL character: refuse it as invalid input."""
 
     @model_validator(mode="after")
@@ -154,54 +154,18 @@ class _NoNul(BaseModel):
 
 
 # -- jobs -------------------------------------------------------------------------------------------------------------
+# the body of POST /v1/jobs is services.jobkinds.JobRequest, one request model per job kind built from these pieces
 #: job params are documented by contract_schemas.JobParams and validated by graspgen's Params (one set of messages)
-_PARAMS_DOC = WithJsonSchema({"anyOf": [{"$ref": "#/components/schemas/JobParams"}, {"type": "null"}]})
+PARAMS_DOC = WithJsonSchema({"anyOf": [{"$ref": "#/components/schemas/JobParams"}, {"type": "null"}]})
 
 
-class JobRequest(_NoNul):
-    model_config = ConfigDict(
-        extra="forbid",
-        json_schema_extra={
-            "examples": [
-                {"object": "ring-screw", "gripper": "pgn-80", "params": _PARAMS_EXAMPLE},
-                {"kind": "cluster", "grasp_set": 17, "params": {"k1": 8, "k2": 2, "seed": 1}},
-                {
-                    "object": "ring-screw",
-                    "gripper": "pgn-80",
-                    "params": {**_PARAMS_EXAMPLE, "validate": True, "select": "best-near-medoid", "density": 7850},
-                },
-            ]
-        },
-    )
-    kind: Literal["generate", "cluster"] = "generate"
-    object: str | None = Field(None, pattern=SLUG, description="object name (generate)")
-    object_version: int | None = Field(None, ge=1, le=ID_MAX, description="default: the newest version")
-    gripper: str | None = Field(None, pattern=SLUG, description="gripper name (generate)")
-    gripper_version: int | None = Field(None, ge=1, le=ID_MAX, description="default: the newest version")
-    grasp_set: int | None = Field(
-        None, ge=1, le=ID_MAX, description="cluster: the grasp set whose candidates are re-clustered"
-    )
-    params: Annotated[dict[str, Any] | None, _PARAMS_DOC] = Field(
-        None,
-        description="generate: any of points, friction, safety_factor, rolls, k1, k2, inside, collision, seed; "
-        "cluster: k1, k2, seed. Both: validate (bool, simulate every exported grasp in MuJoCo and repair failures), "
-        "select ('medoid' | 'best-near-medoid'), density (part density, kg/m^3, 1..100000); docs/QUALITY.md. "
-        "generate also: mass_kg (kg; default: the object version's mass_kg unless density is given), accel (m/s^2), "
-        "hold ('any' | 'off'), position_tolerance (m): criterion (e), CONTRACT.md. A cluster job does not inherit "
-        "validate and select from its source set.",
-        examples=[
-            {"points": 10000, "k1": 16, "k2": 4, "validate": True, "select": "best-near-medoid", "density": 7850}
-        ],
-    )
-
-
-class BulkItem(_NoNul):
+class BulkItem(NoNulModel):
     model_config = ConfigDict(extra="forbid")
     object: str = Field(max_length=200)
     object_version: int | None = Field(None, ge=1, le=ID_MAX)
     gripper: str = Field(max_length=200)
     gripper_version: int | None = Field(None, ge=1, le=ID_MAX)
-    params: Annotated[dict[str, Any] | None, _PARAMS_DOC] = None
+    params: Annotated[dict[str, Any] | None, PARAMS_DOC] = None
 
 
 class BulkRequest(BaseModel):
@@ -247,7 +211,7 @@ class JobOut(BaseModel):
                 "object_version": 3,
                 "gripper": "pgn-80",
                 "gripper_version": 1,
-                "params": {**_PARAMS_EXAMPLE, "friction": 0.5, "inside": False, "collision": "swept"},
+                "params": {**PARAMS_EXAMPLE, "friction": 0.5, "inside": False, "collision": "swept"},
                 "attempts": 1,
                 "created_at": "2026-11-23T16:00:00Z",
                 "started_at": "2026-11-23T16:00:01Z",
@@ -314,7 +278,7 @@ class GraspSetSummary(BaseModel):
                 "gripper": "pgn-80",
                 "gripper_version": 1,
                 "version": 2,
-                "params": {**_PARAMS_EXAMPLE, "friction": 0.5, "inside": False, "collision": "swept"},
+                "params": {**PARAMS_EXAMPLE, "friction": 0.5, "inside": False, "collision": "swept"},
                 "derived_from": None,
                 "job": "4f1c7e4e-3c1a-4a59-9d1e-0b7f6f0b9a10",
                 "grasp_count": 64,

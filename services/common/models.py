@@ -1,7 +1,7 @@
 """The service's tables (SQLAlchemy 2 typed models). Lengths are metres, as everywhere in graspgen.
 
 objects 1-n object_versions      grippers 1-n gripper_versions
-jobs (generate | cluster | bulk; a bulk job is the parent of its items)
+jobs (of a kind registered in services/jobkinds; a bulk job is the parent of its items)
 grasp_sets: one immutable version per object version x gripper version x parameters, numbered per
             (object, gripper) pair; grasps: one row per exported grasp, so the catalogue is queryable without files.
 catalogue_pairs: what the catalogue serves for each (object, gripper) pair, kept by services/common/catalogue.py;
@@ -46,11 +46,9 @@ __all__ = [
     "ChangeCounter",
     "JOB_STATES",
     "TERMINAL_STATES",
-    "JOB_KINDS",
     "utcnow",
 ]
 
-JOB_KINDS = ("generate", "cluster", "bulk")
 JOB_STATES = ("queued", "running", "succeeded", "failed", "cancelled")
 TERMINAL_STATES = frozenset({"succeeded", "failed", "cancelled"})
 

@@ -17,6 +17,7 @@ from sqlalchemy import select
 from services.common.db import Database
 from services.common.models import Job
 from services.common.settings import Settings
+from services.jobkinds import CONTAINER_KINDS
 
 __all__ = ["Dispatcher", "CeleryDispatcher", "EmbeddedDispatcher", "make_dispatcher", "DispatchError"]
 
@@ -137,7 +138,7 @@ class EmbeddedDispatcher(Dispatcher):
                 str(i)
                 for i in s.execute(
                     select(Job.id)
-                    .where(Job.state.in_(("queued", "running")), Job.kind != "bulk")
+                    .where(Job.state.in_(("queued", "running")), Job.kind.not_in(CONTAINER_KINDS))
                     .order_by(Job.created_at)
                 ).scalars()
             ]

@@ -40,6 +40,7 @@ from sqlalchemy import select
 from services.common.db import Database
 from services.common.models import Job, utcnow
 from services.common.settings import Settings
+from services.jobkinds import CONTAINER_KINDS
 from services.worker.runner import abandoned_before
 
 __all__ = [
@@ -129,7 +130,7 @@ class Reconciler:
         with self.db.read_sessions() as s:
 
             def select_ids(*where) -> list[str]:  # type: ignore[no-untyped-def]
-                q = select(Job.id).where(Job.kind != "bulk", *where)
+                q = select(Job.id).where(Job.kind.not_in(CONTAINER_KINDS), *where)
                 if ids is not None:
                     q = q.where(Job.id.in_(ids))
                 return [str(i) for i in s.execute(q.order_by(Job.created_at)).scalars()]

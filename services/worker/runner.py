@@ -1,4 +1,5 @@
-"""Runs one job: claim the row, fetch inputs, call graspgen, store artifacts, commit the result in one transaction.
+"""Runs one job: claim the row, fetch inputs, run its kind (services/jobkinds), store artifacts, commit the result in
+one transaction.
 
 Idempotent by job id: a finished job is never run again, and the grasp set is tied to the job by a unique column, so
 a redelivered message can never add a second grasp-set version. Artifacts go to storage before the transaction that
@@ -14,7 +15,6 @@ import tempfile
 import time
 import uuid
 from collections.abc import Callable
-from dataclasses import dataclass
 from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
@@ -39,8 +39,9 @@ from services.common.models import (
 )
 from services.common.settings import Settings
 from services.common.storage import Storage, StorageError, StoredBlob, make_storage
+from services.jobkinds import RUNNABLE, JobInputs, JobKind, RunContext, is_container
 
-__all__ = ["JobRunner", "STAGE_WEIGHTS", "QUALITY_KWARGS", "HOLD_KWARGS", "stage_weights", "abandoned_before"]
+__all__ = ["JobRunner", "abandoned_before"]
 
 log = logging.getLogger(__name__)
 
@@ -51,69 +52,8 @@ def abandoned_before(settings: Settings, now: datetime | None = None) -> datetim
     return (now or utcnow()) - timedelta(seconds=settings.job_time_limit_s + settings.reconcile_grace_s)
 
 
-#: share of a job's progress bar per core stage (the core reports a fraction within each stage); "validate" (MuJoCo
-#: simulation of the exported grasps) runs only with params.validate and is left out, the rest rescaled, otherwise
-STAGE_WEIGHTS: dict[str, dict[str, float]] = {
-    "generate": {
-        "load": 0.02,
-        "sample": 0.06,
-        "pairs": 0.26,
-        "collision": 0.30,
-        "cluster": 0.08,
-        "validate": 0.24,
-        "export": 0.04,
-    },
-    "cluster": {"load": 0.05, "cluster": 0.45, "validate": 0.45, "export": 0.05},
-}
-
-#: job params passed to graspgen.generate / recluster as keyword arguments, not through graspgen.Params
-QUALITY_KWARGS = ("validate", "select")
-#: criterion (e) and the contact tolerance: graspgen.Params fields, passed by name (a job stored before they existed
-#: has none of them and runs with the core's defaults); recluster takes the mass for validation only
-HOLD_KWARGS = ("mass_kg", "density", "accel", "hold", "position_tolerance")
-RECLUSTER_HOLD_KWARGS = ("mass_kg", "density")
-
-
-def stage_weights(kind: str, validate: bool) -> dict[str, float]:
-    """The stage weights of one job, summing to 1: without validation the "validate" share goes to the others."""
-    weights = dict(STAGE_WEIGHTS.get(kind, STAGE_WEIGHTS["generate"]))
-    if not validate:
-        weights.pop("validate", None)
-    total = sum(weights.values())
-    return {k: w / total for k, w in weights.items()}
-
-
-def _kwargs(params: dict[str, Any], names: tuple[str, ...]) -> dict[str, Any]:
-    return {k: params[k] for k in names if params.get(k) is not None}
-
-
 class _TimeLimitError(Exception):
     pass
-
-
-@dataclass(frozen=True)
-class _Inputs:
-    job_id: uuid.UUID
-    kind: str
-    attempt: int
-    params: dict[str, Any]
-    object_name: str
-    object_version: int
-    object_version_id: int
-    object_id: int
-    object_sha256: str
-    object_file_key: str
-    object_format: str
-    units: str
-    gripper_name: str
-    gripper_version: int
-    gripper_version_id: int
-    gripper_id: int
-    spec: dict[str, Any]
-    source_grasp_set_id: int | None
-    source_export_key: str | None
-    source_candidates_key: str | None
-    params_key: str
 
 
 class JobRunner:
@@ -179,7 +119,7 @@ class JobRunner:
     def _abandoned(self, job: Job) -> bool:
         return job.updated_at < abandoned_before(self.settings)
 
-    def _claim(self, jid: uuid.UUID, redelivered: bool = True) -> _Inputs | str:
+    def _claim(self, jid: uuid.UUID, redelivered: bool = True) -> JobInputs | str:
         with self.db.session() as s:
             job = s.execute(select(Job).where(Job.id == jid).with_for_update()).scalar_one_or_none()
             if job is None:
@@ -187,7 +127,7 @@ class JobRunner:
                 return "missing"
             if job.state in TERMINAL_STATES:
                 return job.state  # a redelivery of a finished job
-            if job.kind == "bulk":
+            if is_container(job.kind):
                 return job.state  # parents are aggregates, never run
             if job.state == "running" and not redelivered and not self._abandoned(job):
                 # a duplicate message (services/worker/reconcile.py) while another worker runs the job: not a new run
@@ -242,7 +182,7 @@ class JobRunner:
             self._parent(s, job)
             obj_name = s.execute(select(ObjectModel.name).where(ObjectModel.id == ov.object_id)).scalar_one()
             grip_name = s.execute(select(Gripper.name).where(Gripper.id == gv.gripper_id)).scalar_one()
-            return _Inputs(
+            return JobInputs(
                 job_id=jid,
                 kind=job.kind,
                 attempt=job.attempts,
@@ -267,65 +207,29 @@ class JobRunner:
             )
 
     # -- execution ------------------------------------------------------------------------------------------------
-    def _execute(self, inp: _Inputs, tmp: Path) -> tuple[bytes, dict[str, Any], list[dict[str, Any]], bytes, Path]:
+    def _execute(self, inp: JobInputs, tmp: Path) -> tuple[bytes, dict[str, Any], list[dict[str, Any]], bytes, Path]:
         import rerun as rr
 
-        import graspgen
-
-        progress = _Progress(self, inp)
+        kind = RUNNABLE.get(inp.kind)
+        if kind is None:
+            raise ValueError(f"unknown job kind {inp.kind!r}")
+        progress = _Progress(self, inp, kind)
         rrd = tmp / "run.rrd"
         rec = rr.RecordingStream("graspgen", recording_id=str(inp.job_id))
         rec.save(rrd)
         try:
             rec.log("job", rr.TextDocument(self._metadata_markdown(inp), media_type=rr.MediaType.MARKDOWN), static=True)
             progress("load", 0.0)
-            p = inp.params
-            quality = _kwargs(p, QUALITY_KWARGS)
-            part = tmp / f"part.{inp.object_format}"  # the format is a whitelisted token, never a user path
-            if inp.kind == "generate":
-                self.storage.download(inp.object_file_key, part)
-                loaded = self._check_memory(inp, part)  # MemoryLimitError: the job fails, never redelivered
-                gs = graspgen.generate(
-                    loaded,
-                    inp.spec,
-                    units=inp.units,
-                    points=p["points"],
-                    friction=p["friction"],
-                    safety_factor=p["safety_factor"],
-                    rolls=p["rolls"],
-                    k1=p["k1"],
-                    k2=p["k2"],
-                    inside=p["inside"],
-                    collision=p["collision"],
-                    seed=p["seed"],
+            gs = kind.run(
+                RunContext(
+                    inputs=inp,
+                    storage=self.storage,
+                    tmp=tmp,
                     recording=rec,
                     progress=progress,
-                    object_name=inp.object_name,
-                    object_version=inp.object_version,
-                    **quality,
-                    **_kwargs(p, HOLD_KWARGS),
+                    load_part=lambda path: self._check_memory(inp, path),
                 )
-            elif inp.kind == "cluster":
-                assert inp.source_candidates_key and inp.source_export_key
-                npz = self.storage.download(inp.source_candidates_key, tmp / "source-candidates.npz")
-                previous = json.loads(self.storage.get_bytes(inp.source_export_key))
-                if quality.get("validate") or quality.get("select", "medoid") != "medoid":
-                    # validation and quality scoring need the part; recluster loads it in metres from `units`
-                    self.storage.download(inp.object_file_key, part)
-                    quality.update(mesh=str(part), units=inp.units)
-                gs = graspgen.recluster(
-                    str(npz),
-                    previous,
-                    k1=inp.params["k1"],
-                    k2=inp.params["k2"],
-                    seed=inp.params["seed"],
-                    recording=rec,
-                    progress=progress,
-                    **quality,
-                    **_kwargs(p, RECLUSTER_HOLD_KWARGS),
-                )
-            else:
-                raise ValueError(f"unknown job kind {inp.kind!r}")
+            )
             progress("export", 1.0)
             export_bytes = gs.to_json_bytes()
             # the NPZ goes to storage from memory: a temp file would be written, read back for its sha256 and
@@ -342,7 +246,7 @@ class JobRunner:
             rec.disconnect()  # finalises the .rrd (footer) now rather than at garbage collection
         return export_bytes, gs.stats, gs.grasps, candidates, rrd
 
-    def _check_memory(self, inp: _Inputs, path: Path):  # type: ignore[no-untyped-def]
+    def _check_memory(self, inp: JobInputs, path: Path):  # type: ignore[no-untyped-def]
         """The part, loaded once, after the job's estimated peak memory was checked against this worker's budget."""
         from graspgen.parts import load_part
         from services.common.memory_guard import check_generate
@@ -360,7 +264,7 @@ class JobRunner:
         )
         return part
 
-    def _metadata_markdown(self, inp: _Inputs) -> str:
+    def _metadata_markdown(self, inp: JobInputs) -> str:
         meta = {
             "job": str(inp.job_id),
             "kind": inp.kind,
@@ -382,7 +286,7 @@ class JobRunner:
     # -- result ---------------------------------------------------------------------------------------------------
     def _commit_result(
         self,
-        inp: _Inputs,
+        inp: JobInputs,
         export_bytes: bytes,
         stats: dict[str, Any],
         grasps: list[dict[str, Any]],
@@ -444,7 +348,7 @@ class JobRunner:
             self._discard(inp, blobs)  # cancelled, or linked to an identical job's grasp set: our files are orphans
         return state
 
-    def _storage_failed(self, inp: _Inputs, blobs: list[StoredBlob], exc: StorageError) -> str:
+    def _storage_failed(self, inp: JobInputs, blobs: list[StoredBlob], exc: StorageError) -> str:
         """Fail the job without a grasp set, after removing the blobs it wrote that nothing refers to."""
         log.warning("job %s: storage failed while writing its results: %s", inp.job_id, exc.reason)
         self._discard(inp, blobs)
@@ -459,7 +363,7 @@ class JobRunner:
             ),
         )
 
-    def _discard(self, inp: _Inputs, blobs: list[StoredBlob]) -> None:
+    def _discard(self, inp: JobInputs, blobs: list[StoredBlob]) -> None:
         """Delete the blobs this run created that no row references, under the object row's lock, which
         `_insert_grasp_set` also holds while it checks its blobs exist (so a concurrent job that found the same bytes
         already stored either is seen here as a reference, or sees them gone and writes them again)."""
@@ -482,7 +386,7 @@ class JobRunner:
     def _insert_grasp_set(
         self,
         s: Session,
-        inp: _Inputs,
+        inp: JobInputs,
         blobs: list[StoredBlob],
         puts: tuple[Callable[[], StoredBlob], ...],
         stats: dict[str, Any],
@@ -567,10 +471,10 @@ class JobRunner:
 class _Progress:
     """The core's progress callback: throttled writes to the job row, the cancel flag and the deadline."""
 
-    def __init__(self, runner: JobRunner, inp: _Inputs) -> None:
+    def __init__(self, runner: JobRunner, inp: JobInputs, kind: JobKind) -> None:
         self.runner = runner
         self.jid = inp.job_id
-        self.weights = stage_weights(inp.kind, bool(inp.params.get("validate")))
+        self.weights = kind.progress_weights(validate=bool(inp.params.get("validate")))
         self.interval = runner.settings.progress_interval_s
         self.deadline = time.monotonic() + runner.settings.job_soft_time_limit_s
         self.last_stage: str | None = None

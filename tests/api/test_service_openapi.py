@@ -73,6 +73,23 @@ def test_bodies_and_payloads_carry_examples(schema):
     assert schema["components"]["schemas"]["JobRequest"]["examples"]
 
 
+def test_the_job_kinds_documented_are_the_registry(schema):
+    """`POST /v1/jobs` takes one body per kind that runs (services/jobkinds), `GET /v1/jobs?kind=` every kind."""
+    from services.jobkinds import KINDS, RUNNABLE
+
+    body = schema["components"]["schemas"]["JobRequest"]
+    mapping = body["discriminator"]["mapping"]
+    assert body["discriminator"]["propertyName"] == "kind" and set(mapping) == set(RUNNABLE)
+    assert sorted(ref["$ref"] for ref in body["oneOf"]) == sorted(mapping.values())
+    for name, ref in mapping.items():
+        variant = schema["components"]["schemas"][ref.rsplit("/", 1)[1]]
+        assert variant["properties"]["kind"]["const"] == name and variant["additionalProperties"] is False
+    (kind,) = [p for p in schema["paths"]["/v1/jobs"]["get"]["parameters"] if p["name"] == "kind"]
+    (pattern,) = [s["pattern"] for s in kind["schema"]["anyOf"] if "pattern" in s]
+    assert all(re.fullmatch(pattern, name) for name in KINDS)
+    assert not any(re.fullmatch(pattern, bad) for bad in ("nope", "", "generate|cluster", "Generate"))
+
+
 def test_operation_ids_are_readable_and_unique(schema):
     ids = [op["operationId"] for ops in schema["paths"].values() for op in ops.values()]
     assert len(ids) == len(set(ids))
@@ -127,8 +144,9 @@ def test_contract_payloads_are_typed_with_units_and_examples(schema):
     assert components["ExportGrasp"]["additionalProperties"] is True  # new library fields pass through
     gripper_body = schema["paths"]["/v1/grippers"]["post"]["requestBody"]["content"]["application/json"]["schema"]
     assert gripper_body["allOf"] == [{"$ref": "#/components/schemas/GripperSpec"}]
-    job_params = components["JobRequest"]["properties"]["params"]
-    assert {"$ref": "#/components/schemas/JobParams"} in job_params["anyOf"]
+    for kind_ref in components["JobRequest"]["oneOf"]:  # each job kind's body (services/jobkinds)
+        job_params = components[kind_ref["$ref"].rsplit("/", 1)[1]]["properties"]["params"]
+        assert {"$ref": "#/components/schemas/JobParams"} in job_params["anyOf"]
     for path in ("/v1/grasp-sets/{grasp_set_id}", "/v1/catalogue/{object}/{gripper}"):
         ok = schema["paths"][path]["get"]["responses"]["200"]["content"]["application/json"]
         assert ok["schema"] == {"$ref": "#/components/schemas/GraspSetExport"}

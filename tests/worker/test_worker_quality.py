@@ -9,7 +9,8 @@ import io
 import pytest
 from services_conftest import slug
 
-from services.worker.runner import STAGE_WEIGHTS, JobRunner, stage_weights
+from services.jobkinds import RUNNABLE
+from services.worker.runner import JobRunner
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
@@ -41,8 +42,8 @@ def runner(pg_service):
 
 
 def test_stage_weights_sum_to_one_with_and_without_validation():
-    for kind in STAGE_WEIGHTS:
-        with_v, without = stage_weights(kind, True), stage_weights(kind, False)
+    for kind in RUNNABLE.values():
+        with_v, without = kind.progress_weights(validate=True), kind.progress_weights(validate=False)
         assert "validate" in with_v and "validate" not in without
         assert abs(sum(with_v.values()) - 1) < 1e-9 and abs(sum(without.values()) - 1) < 1e-9
         names = list(with_v)

@@ -1,4 +1,5 @@
-"""Job submission (single, cluster, bulk), idempotency keys, views and cancellation.
+"""Job submission (a job of any kind that runs, services/jobkinds; a bulk parent with its items), idempotency keys,
+views and cancellation.
 
 Rows are committed before anything is sent to a worker; if the broker refuses, the rows are removed again so that a
 failed request leaves the database as it was.
@@ -15,13 +16,11 @@ from sqlalchemy import and_, delete, or_, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from graspgen.errors import GraspgenError, InvalidParameterError
-from graspgen.params import Params
+from graspgen.errors import GraspgenError
 from services.common import jobs as J  # noqa: N812 - short name for the shared job helpers
 from services.common.logs import request_id_var
 from services.common.models import (
     TERMINAL_STATES,
-    GraspSet,
     Gripper,
     GripperVersion,
     Job,
@@ -32,11 +31,13 @@ from services.common.models import (
 from services.common.settings import Settings
 from services.common.storage import Storage, StorageError
 from services.common.tokens import Principal
+from services.jobkinds import RUNNABLE, JobRequest, is_container
+from services.jobkinds import bulk as bulk_kind
 from services.worker.dispatch import Dispatcher, DispatchError
 
 from ..pagination import decode_cursor, fetch_page, next_link
 from ..problems import ApiError
-from ..schemas import BulkRequest, JobRequest
+from ..schemas import BulkRequest
 
 __all__ = [
     "submit_job",
@@ -45,118 +46,9 @@ __all__ = [
     "get_job",
     "list_jobs",
     "cancel_job",
-    "CLUSTER_PARAMS",
-    "QUALITY_PARAMS",
 ]
 
 log = logging.getLogger(__name__)
-
-CLUSTER_PARAMS = ("k1", "k2", "seed")
-#: job params beyond graspgen.Params (docs/QUALITY.md): keyword arguments of graspgen.generate / recluster
-QUALITY_PARAMS = ("validate", "select")
-
-
-def split_quality(given: dict[str, Any] | None) -> tuple[dict[str, Any], dict[str, Any]]:
-    """(core params, quality params) of a job's params; quality params are checked here so that a bad value is a
-    422 at submission. Only non-default values are kept: `validate` only when true, `select` only when not "medoid".
-    `density` is a core parameter (graspgen.Params: criterion (e) and validation)."""
-    from graspgen.quality import SELECT_MODES
-
-    core = dict(given or {})
-    q = {k: core.pop(k) for k in QUALITY_PARAMS if k in core}
-    validate = q.get("validate", False)
-    if not isinstance(validate, bool):
-        raise InvalidParameterError(f"validate must be true or false, got {validate!r}", field="validate")
-    select_ = q.get("select", "medoid")
-    if not isinstance(select_, str) or select_ not in SELECT_MODES:
-        raise InvalidParameterError(f"select must be one of {', '.join(SELECT_MODES)}, got {select_!r}", field="select")
-    out: dict[str, Any] = {}
-    if validate:
-        out["validate"] = True
-    if select_ != "medoid":
-        out["select"] = select_
-    return core, out
-
-
-def _object_version(session: Session, name: str, version: int | None) -> ObjectVersion:
-    q = (
-        select(ObjectVersion)
-        .join(ObjectModel, ObjectModel.id == ObjectVersion.object_id)
-        .where(ObjectModel.name == name)
-    )
-    q = q.where(ObjectVersion.version == version) if version else q.order_by(ObjectVersion.version.desc()).limit(1)
-    v = session.execute(q).scalars().first()
-    if v is None:
-        what = f"object {name!r}" + (f" version {version}" if version else "")
-        raise ApiError(422, "unknown-object", f"there is no {what}", field="object")
-    return v
-
-
-def _gripper_version(session: Session, name: str, version: int | None) -> GripperVersion:
-    q = select(GripperVersion).join(Gripper, Gripper.id == GripperVersion.gripper_id).where(Gripper.name == name)
-    q = q.where(GripperVersion.version == version) if version else q.order_by(GripperVersion.version.desc()).limit(1)
-    v = session.execute(q).scalars().first()
-    if v is None:
-        what = f"gripper {name!r}" + (f" version {version}" if version else "")
-        raise ApiError(422, "unknown-gripper", f"there is no {what}", field="gripper")
-    return v
-
-
-def _effective_params(
-    given: dict[str, Any] | None, spec: dict[str, Any], mass_kg: float | None = None
-) -> dict[str, Any]:
-    """graspgen.Params with friction resolved from the gripper and the object version's mass when the job gives
-    neither mass_kg nor density: the stored params say exactly what the run used."""
-    core, quality = split_quality(given)
-    if mass_kg is not None and core.get("mass_kg") is None and core.get("density") is None:
-        core["mass_kg"] = mass_kg
-    p = Params.from_dict(core)  # InvalidParameterError -> 422
-    return {**p.to_dict(friction=p.friction if p.friction is not None else float(spec["friction"])), **quality}
-
-
-def _resolve_generate(session: Session, item: dict[str, Any]) -> dict[str, Any]:
-    if not item.get("object") or not item.get("gripper"):
-        raise ApiError(422, "validation-error", "a generate job needs object and gripper", field="object")
-    ov = _object_version(session, item["object"], item.get("object_version"))
-    gv = _gripper_version(session, item["gripper"], item.get("gripper_version"))
-    return {
-        "object_version_id": ov.id,
-        "gripper_version_id": gv.id,
-        "params": _effective_params(item.get("params"), gv.spec, ov.mass_kg),
-    }
-
-
-def _resolve_cluster(session: Session, body: JobRequest) -> dict[str, Any]:
-    if body.grasp_set is None:
-        raise ApiError(422, "validation-error", "a cluster job needs grasp_set", field="grasp_set")
-    extra = [k for k in ("object", "object_version", "gripper", "gripper_version") if getattr(body, k) is not None]
-    if extra:
-        raise ApiError(422, "validation-error", f"a cluster job takes grasp_set, not {extra[0]}", field=extra[0])
-    source = session.get(GraspSet, body.grasp_set)
-    if source is None:
-        raise ApiError(422, "unknown-grasp-set", f"there is no grasp set {body.grasp_set}", field="grasp_set")
-    given = dict(body.params or {})
-    unknown = sorted(set(given) - set(CLUSTER_PARAMS) - set(QUALITY_PARAMS) - {"density"})
-    if unknown:
-        raise InvalidParameterError(
-            "a cluster job takes only k1, k2, seed, validate, select and density; not " + ", ".join(unknown),
-            field=unknown[0],
-        )
-    given, quality = split_quality(given)
-    Params.from_dict(given)  # a bad k1, k2, seed or density is named before anything about the source set
-    if source.candidates_key is None:
-        raise ApiError(422, "no-candidates", f"grasp set {source.id} has no stored candidates", field="grasp_set")
-    # quality options are the cluster job's own, not inherited from the source set
-    base, _ = split_quality(source.params)
-    if "density" in given:
-        base.pop("mass_kg", None)  # a density for validation replaces the source's mass (one of the two)
-    merged = {**Params.from_dict({**base, **given}).to_dict(), **quality}
-    return {
-        "object_version_id": source.object_version_id,
-        "gripper_version_id": source.gripper_version_id,
-        "source_grasp_set_id": source.id,
-        "params": merged,
-    }
 
 
 def _replay(session: Session, principal: Principal, key: str | None, request_sha: str) -> Job | None:
@@ -200,18 +92,20 @@ def submit_job(
 ) -> tuple[Job, bool]:
     """Returns (job, replayed): replayed is true when an Idempotency-Key matched an earlier identical request.
 
-    `memory`: check a generate job's estimated peak memory against the job memory budget (422 `memory-limit`)."""
+    `memory`: check the estimated peak memory of a job whose kind `checks_memory` against the job memory budget (422
+    `memory-limit`)."""
     request = body.model_dump(exclude_none=True)
     request_sha = J.sha256_json(request)
     replayed = _replay(session, principal, idempotency_key, request_sha)
     if replayed is not None:
         return replayed, True
-    resolved = _resolve_cluster(session, body) if body.kind == "cluster" else _resolve_generate(session, request)
-    if memory is not None and body.kind != "cluster":
+    kind = RUNNABLE[body.root.kind]  # the union holds exactly the kinds that run
+    resolved = kind.resolve(session, body.root)
+    if memory is not None and kind.checks_memory:
         _check_memory(session, *memory, resolved)
     job = Job(
         id=uuid.uuid4(),
-        kind=body.kind,
+        kind=kind.name,
         state="queued",
         request=request,
         idempotency_key=idempotency_key,
@@ -278,9 +172,10 @@ def submit_bulk(
     replayed = _replay(session, principal, idempotency_key, request_sha)
     if replayed is not None:
         return replayed, True
+    item_kind = bulk_kind.KIND.item
     parent = Job(
         id=uuid.uuid4(),
-        kind="bulk",
+        kind=bulk_kind.KIND.name,
         state="queued",
         request={"items": len(body.items)},
         idempotency_key=idempotency_key,
@@ -291,10 +186,10 @@ def submit_bulk(
     session.add(parent)
     session.flush()
     children: list[Job] = []
-    for i, item in enumerate(request["items"]):
+    for i, (item, body_item) in enumerate(zip(request["items"], body.items, strict=True)):
         child = Job(
             id=uuid.uuid4(),
-            kind="generate",
+            kind=item_kind.name,
             state="queued",
             request=item,
             parent_id=parent.id,
@@ -303,7 +198,7 @@ def submit_bulk(
             request_id=request_id_var.get(),
         )
         try:
-            for k, v in _resolve_generate(session, item).items():
+            for k, v in item_kind.resolve(session, body_item).items():
                 setattr(child, k, v)
         except ApiError as exc:
             # a bad item fails alone; the others run
@@ -372,7 +267,7 @@ def job_out(session: Session, job: Job) -> dict[str, Any]:
             .where(GripperVersion.id == job.gripper_version_id)
         ).one()
         out["gripper"], out["gripper_version"] = name, version
-    if job.kind == "bulk":
+    if is_container(job.kind):
         agg = J.aggregate_children(session, job.id)
         children = session.execute(select(Job).where(Job.parent_id == job.id).order_by(Job.item_index)).scalars()
         out["summary"] = {s: agg.counts.get(s, 0) for s in ("queued", "running", "succeeded", "failed", "cancelled")}
@@ -451,19 +346,20 @@ def cancel_job(session: Session, dispatcher: Dispatcher, principal: Principal, j
     job = session.get(Job, job_id)
     if job is None:
         raise ApiError(404, "not-found", f"no job {job_id}")
-    if job.kind != "bulk":
+    container = is_container(job.kind)
+    if not container:
         # rows are locked child first, then parent, the order the worker uses when a child finishes
         job = session.execute(
             select(Job).where(Job.id == job_id).with_for_update().execution_options(populate_existing=True)
         ).scalar_one()
     if job.created_by != principal.name and not principal.has("admin"):
         raise ApiError(403, "forbidden", "only the job's submitter or an admin token may cancel it")
-    if job.state in TERMINAL_STATES and job.kind != "bulk":
+    if job.state in TERMINAL_STATES and not container:
         if job.state == "cancelled":
             return job
         raise ApiError(409, "job-finished", f"the job has already {job.state}", state=job.state)
     targets = [job]
-    if job.kind == "bulk":
+    if container:
         targets = list(
             session.execute(
                 select(Job).where(Job.parent_id == job.id, Job.state.not_in(TERMINAL_STATES)).with_for_update()
@@ -482,7 +378,7 @@ def cancel_job(session: Session, dispatcher: Dispatcher, principal: Principal, j
         if t.state == "queued":
             J.finish(t, "cancelled")  # never started: cancelled now; running ones stop at their next stage
             revoke.append(str(t.id))
-    if job.kind == "bulk":
+    if container:
         session.flush()
         J.refresh_parent(session, job.id)
     elif job.parent_id is not None:

@@ -5,11 +5,12 @@ from typing import Annotated
 
 from fastapi import APIRouter, Header, Path, Query, Response
 
-from services.common.models import JOB_KINDS, JOB_STATES, TERMINAL_STATES
+from services.common.models import JOB_STATES, TERMINAL_STATES
+from services.jobkinds import DEFAULT_KIND, KINDS, RUNNABLE, JobRequest
 
 from ..crud import jobs as crud
 from ..deps import DispatcherDep, ReadDep, ReadSessionDep, SessionDep, SettingsDep, StorageDep, WriteDep
-from ..schemas import BulkRequest, JobOut, JobPage, JobRequest
+from ..schemas import BulkRequest, JobOut, JobPage
 from . import problems
 
 router = APIRouter(prefix="/v1", tags=["jobs"])
@@ -42,7 +43,9 @@ def _accepted(response: Response, out: dict, replayed: bool) -> dict:
     status_code=202,
     response_model=JobOut,
     summary="Submit a job: generate grasps, or re-cluster a stored grasp set",
-    description="`kind` is `generate` (object, gripper, params) or `cluster` (grasp_set and new k1/k2/seed). "
+    description="`kind` chooses the body: "
+    + ", ".join(f"`{name}`" for name in RUNNABLE)
+    + f" (default `{DEFAULT_KIND}`), each described in its schema. "
     "The job row is committed before the job is queued. Poll the `Location` until `state` is final.",
     responses=problems(413, 422, 503),
 )
@@ -97,7 +100,7 @@ def list_jobs(
     session: ReadSessionDep,
     settings: SettingsDep,
     state: Annotated[str | None, Query(pattern="^(" + "|".join(JOB_STATES) + ")$")] = None,
-    kind: Annotated[str | None, Query(pattern="^(" + "|".join(JOB_KINDS) + ")$")] = None,
+    kind: Annotated[str | None, Query(pattern="^(" + "|".join(KINDS) + ")$")] = None,
     cursor: str | None = None,
     limit: Annotated[int | None, Query(ge=1)] = None,
 ) -> dict:

@@ -1,0 +1,151 @@
+"""The `generate` job kind: grasps for an object version and a gripper version (graspgen.generate). A job that names
+no kind is one of these (CONTRACT.md), and so is every item of a bulk job."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Annotated, Any, Literal
+
+from pydantic import ConfigDict, Field
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from graspgen.params import Params
+from services.api.schemas import ID_MAX, PARAMS_DOC, PARAMS_EXAMPLE, SLUG, BulkItem, NoNulModel
+from services.common.models import Gripper, GripperVersion, ObjectModel, ObjectVersion
+
+from .kind import JobKind, RunContext
+from .params import QUALITY_PARAMS, given_kwargs, split_quality
+
+if TYPE_CHECKING:
+    from graspgen.export import GraspSet
+
+__all__ = ["KIND", "GenerateJobRequest", "resolve", "run", "HOLD_PARAMS"]
+
+#: criterion (e) and the contact tolerance: graspgen.Params fields, passed by name
+HOLD_PARAMS = ("mass_kg", "density", "accel", "hold", "position_tolerance")
+
+
+class GenerateJobRequest(NoNulModel):
+    """Grasps for an object and a gripper (their newest versions unless given) with the given params."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {"object": "ring-screw", "gripper": "pgn-80", "params": PARAMS_EXAMPLE},
+                {
+                    "kind": "generate",
+                    "object": "ring-screw",
+                    "gripper": "pgn-80",
+                    "params": {**PARAMS_EXAMPLE, "validate": True, "select": "best-near-medoid", "density": 7850},
+                },
+            ]
+        },
+    )
+    kind: Literal["generate"] = Field("generate", description="may be left out: the default kind")
+    object: str = Field(pattern=SLUG, description="object name")
+    object_version: int | None = Field(None, ge=1, le=ID_MAX, description="default: the newest version")
+    gripper: str = Field(pattern=SLUG, description="gripper name")
+    gripper_version: int | None = Field(None, ge=1, le=ID_MAX, description="default: the newest version")
+    params: Annotated[dict[str, Any] | None, PARAMS_DOC] = Field(
+        None,
+        description="any of points, friction, safety_factor, rolls, k1, k2, inside, collision, seed; validate (bool, "
+        "simulate every exported grasp in MuJoCo and repair failures), select ('medoid' | 'best-near-medoid'), "
+        "density (part density, kg/m^3, 1..100000); docs/QUALITY.md. mass_kg (kg; default: the object version's "
+        "mass_kg unless density is given), accel (m/s^2), hold ('any' | 'off'), position_tolerance (m): criterion "
+        "(e), CONTRACT.md.",
+        examples=[
+            {"points": 10000, "k1": 16, "k2": 4, "validate": True, "select": "best-near-medoid", "density": 7850}
+        ],
+    )
+
+
+# -- submission (the API) ---------------------------------------------------------------------------------------------
+def _version(session: Session, what: str, name: str, version: int | None) -> ObjectVersion | GripperVersion:
+    """The object's or gripper's (`what`) given version, or its newest; 422 `unknown-<what>` when there is none."""
+    from services.api.problems import ApiError  # the worker imports this module for `run` and never loads the API
+
+    row, parent, link = _VERSIONED[what]
+    q = select(row).join(parent, parent.id == link).where(parent.name == name)
+    q = q.where(row.version == version) if version else q.order_by(row.version.desc()).limit(1)
+    v = session.execute(q).scalars().first()
+    if v is None:
+        label = f"{what} {name!r}" + (f" version {version}" if version else "")
+        raise ApiError(422, f"unknown-{what}", f"there is no {label}", field=what)
+    return v
+
+
+_VERSIONED = {
+    "object": (ObjectVersion, ObjectModel, ObjectVersion.object_id),
+    "gripper": (GripperVersion, Gripper, GripperVersion.gripper_id),
+}
+
+
+def _effective_params(
+    given: dict[str, Any] | None, spec: dict[str, Any], mass_kg: float | None = None
+) -> dict[str, Any]:
+    """graspgen.Params with friction resolved from the gripper and the object version's mass when the job gives
+    neither mass_kg nor density: the stored params say exactly what the run used."""
+    core, quality = split_quality(given)
+    if mass_kg is not None and core.get("mass_kg") is None and core.get("density") is None:
+        core["mass_kg"] = mass_kg
+    p = Params.from_dict(core)  # InvalidParameterError -> 422
+    return {**p.to_dict(friction=p.friction if p.friction is not None else float(spec["friction"])), **quality}
+
+
+def resolve(session: Session, body: GenerateJobRequest | BulkItem) -> dict[str, Any]:
+    """A `POST /v1/jobs` body or a bulk item (the same fields): the newest versions unless given, and the params."""
+    ov = _version(session, "object", body.object, body.object_version)
+    gv = _version(session, "gripper", body.gripper, body.gripper_version)
+    return {
+        "object_version_id": ov.id,
+        "gripper_version_id": gv.id,
+        "params": _effective_params(body.params, gv.spec, ov.mass_kg),
+    }
+
+
+# -- the run (the worker) ---------------------------------------------------------------------------------------------
+def run(ctx: RunContext) -> GraspSet:
+    import graspgen
+
+    inp, p = ctx.inputs, ctx.inputs.params
+    loaded = ctx.load_part(ctx.download_part())  # MemoryLimitError: the job fails, never redelivered
+    return graspgen.generate(
+        loaded,
+        inp.spec,
+        units=inp.units,
+        points=p["points"],
+        friction=p["friction"],
+        safety_factor=p["safety_factor"],
+        rolls=p["rolls"],
+        k1=p["k1"],
+        k2=p["k2"],
+        inside=p["inside"],
+        collision=p["collision"],
+        seed=p["seed"],
+        recording=ctx.recording,
+        progress=ctx.progress,
+        object_name=inp.object_name,
+        object_version=inp.object_version,
+        **given_kwargs(p, QUALITY_PARAMS),
+        **given_kwargs(p, HOLD_PARAMS),
+    )
+
+
+KIND = JobKind(
+    name="generate",
+    request=GenerateJobRequest,
+    resolve=resolve,
+    run=run,
+    # "validate" (MuJoCo simulation of the exported grasps) counts only with params.validate
+    stage_weights={
+        "load": 0.02,
+        "sample": 0.06,
+        "pairs": 0.26,
+        "collision": 0.30,
+        "cluster": 0.08,
+        "validate": 0.24,
+        "export": 0.04,
+    },
+    checks_memory=True,
+)
