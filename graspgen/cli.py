@@ -13,12 +13,14 @@ import sys
 import time
 import traceback
 import uuid
+from dataclasses import fields
 from pathlib import Path
-from typing import Any
+from typing import Any, get_args, get_type_hints
 
 from .errors import Cancelled, GraspgenError, InvalidUnitsError
 from .examples import EXAMPLE_GRIPPER
-from .params import HOLD_MODES, SELECT_MODES, QualityOptions
+from .params import Params, QualityOptions
+from .units import UNIT_SCALE
 
 __all__ = ["main", "DEMO_GRIPPER"]
 
@@ -36,39 +38,34 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _add_run_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--points", type=int, default=10_000, help="target number of surface points (default 10000)")
-    p.add_argument("--friction", type=float, default=None, help="friction coefficient (default: the gripper's)")
-    p.add_argument("--safety-factor", type=float, default=1.5, help="friction cone divisor (default 1.5)")
-    p.add_argument("--rolls", type=int, default=16, help="roll angles about the closing axis (default 16)")
-    p.add_argument("--k1", type=int, default=16, help="translation clusters (default 16)")
-    p.add_argument("--k2", type=int, default=4, help="direction clusters per translation cluster (default 4)")
-    p.add_argument("--inside", action="store_true", help="also inside grasps (fingers opening outwards)")
-    p.add_argument("--collision", choices=("swept", "paper"), default="swept", help="collision model")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument(
-        "--select",
-        choices=SELECT_MODES,
-        default="medoid",
-        help="medoid (the paper) or the best-scoring member near each medoid (docs/QUALITY.md)",
-    )
-    p.add_argument(
-        "--validate",
-        action="store_true",
-        help="simulate every exported grasp in MuJoCo (needs the part's mass and the gripper's grip_force)",
-    )
-    m = p.add_mutually_exclusive_group()
-    m.add_argument("--mass", type=float, default=None, help="the part's mass, kg (criterion (e) and --validate)")
-    m.add_argument("--density", type=float, default=None, help="the part's density, kg/m^3 (mass = density x volume)")
-    p.add_argument("--accel", type=float, default=9.81, help="acceleration beyond gravity a held part resists, m/s^2")
-    p.add_argument(
-        "--hold", choices=HOLD_MODES, default="any", help="criterion (e): any (default, needs mass and grip_force), off"
-    )
-    p.add_argument(
-        "--position-tolerance",
-        type=float,
-        default=0.001,
-        help="criterion (c) holds for every surface normal within this distance of a contact, m (default 0.001)",
-    )
+    """Every field of Params and the job options of QualityOptions, as their types and metadata describe them."""
+    hints = {**get_type_hints(Params), **get_type_hints(QualityOptions)}
+    quality = [f for f in fields(QualityOptions) if f.name in QualityOptions.JOB_OPTIONS]
+    groups: dict[str, Any] = {}  # mutually exclusive groups by name
+    for f in (*fields(Params), *quality):
+        meta = f.metadata
+        flag = meta["flag"] or "--" + f.name.replace("_", "-")
+        target = p
+        if meta["exclusive"]:
+            if meta["exclusive"] not in groups:
+                groups[meta["exclusive"]] = p.add_mutually_exclusive_group()
+            target = groups[meta["exclusive"]]
+        kind = hints[f.name]
+        if kind is bool:
+            target.add_argument(flag, dest=f.name, action="store_true", help=meta["help"])
+            continue
+        # `float | None` -> float: None is the default, never typed on the command line
+        scalar = next(t for t in get_args(kind) or (kind,) if t is not type(None))
+        shown = "" if f.default is None else " (default %(default)s)"
+        target.add_argument(
+            flag,
+            dest=f.name,
+            type=scalar,
+            choices=meta["choices"],
+            default=f.default,
+            metavar=None if meta["choices"] else flag[2:].replace("-", "_").upper(),
+            help=meta["help"] + shown,
+        )
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -76,7 +73,7 @@ def _parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     g = sub.add_parser("generate", help="grasps for one part and gripper")
     g.add_argument("mesh", help="STL/OBJ/PLY/OFF/GLB mesh, or PLY/NPZ point cloud")
-    g.add_argument("--units", choices=("mm", "cm", "m", "in"), help="the length unit of the file (required)")
+    g.add_argument("--units", choices=tuple(UNIT_SCALE), help="the length unit of the file (required)")
     g.add_argument("--gripper", required=True, help="gripper spec JSON (metres)")
     g.add_argument("--name", help="object name in the export (default: the file stem)")
     _add_run_options(g)
@@ -92,7 +89,7 @@ def _parser() -> argparse.ArgumentParser:
     r = sub.add_parser("render", help="PNG picture of a grasp set on its part")
     r.add_argument("grasps", help="grasp_set/1 JSON")
     r.add_argument("--mesh", required=True, help="the part's mesh")
-    r.add_argument("--units", required=True, choices=("mm", "cm", "m", "in"), help="the length unit of the mesh")
+    r.add_argument("--units", required=True, choices=tuple(UNIT_SCALE), help="the length unit of the mesh")
     r.add_argument("--out", required=True, help="PNG to write")
     r.add_argument("--size", default="800x600", help="WIDTHxHEIGHT in pixels (default 800x600)")
     w = sub.add_parser("warmup", help="compile every numba kernel into numba's on-disk cache (no cold start)")
@@ -156,22 +153,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run_kwargs(args: argparse.Namespace) -> dict[str, Any]:
-    return dict(
-        points=args.points,
-        friction=args.friction,
-        safety_factor=args.safety_factor,
-        rolls=args.rolls,
-        k1=args.k1,
-        k2=args.k2,
-        inside=args.inside,
-        collision=args.collision,
-        seed=args.seed,
-        mass_kg=args.mass,
-        density=args.density,
-        accel=args.accel,
-        hold=args.hold,
-        position_tolerance=args.position_tolerance,
-    )
+    return {f.name: getattr(args, f.name) for f in fields(Params)}
 
 
 def _quality_kwargs(args: argparse.Namespace) -> dict[str, Any]:
@@ -241,7 +223,6 @@ def _warmup(args: argparse.Namespace) -> int:
 def _generate(args: argparse.Namespace) -> int:
     from . import pipeline
     from .gripper import GripperSpec
-    from .params import Params
     from .units import extents_under_each_unit
 
     spec = GripperSpec.load(args.gripper)

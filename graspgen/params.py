@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, field, fields
 from typing import Any, ClassVar
 
 from .errors import InvalidParameterError
@@ -44,25 +44,47 @@ class Tolerances:
 TOLERANCES = Tolerances()
 
 
+def _option(
+    default: Any,
+    help: str,
+    *,
+    flag: str | None = None,
+    choices: tuple[str, ...] | None = None,
+    exclusive: str | None = None,
+) -> Any:
+    """A field that the command line offers (cli.py builds its options from these): `help` says what it is,
+    `flag` when the option is not named after the field, `choices` for a closed set, `exclusive` names a group of
+    options of which one at most may be given."""
+    return field(default=default, metadata={"help": help, "flag": flag, "choices": choices, "exclusive": exclusive})
+
+
 @dataclass(frozen=True)
 class Params:
-    points: int = 10_000
-    friction: float | None = None  # None: the gripper's own coefficient
-    safety_factor: float = 1.5
-    rolls: int = 16
-    k1: int = 16
-    k2: int = 4
-    inside: bool = False
-    collision: str = "swept"
-    seed: int = 0
-    #: the part's mass (kg), or its density (kg/m^3) times the mesh volume; criterion (e) needs one of them
-    mass_kg: float | None = None
-    density: float | None = None
-    #: acceleration (m/s^2) on top of gravity that a held part must resist in every direction
-    accel: float = STANDARD_GRAVITY
-    hold: str = "any"
-    #: criterion (c) holds for every surface normal within this distance (m) of each contact
-    position_tolerance: float = 1.0e-3
+    """The run parameters (CONTRACT.md `params`), validated; the CLI's options are built from these fields."""
+
+    points: int = _option(10_000, "target number of surface points")
+    friction: float | None = _option(None, "friction coefficient (default: the gripper's)")
+    safety_factor: float = _option(1.5, "friction cone divisor")
+    rolls: int = _option(16, "roll angles about the closing axis")
+    k1: int = _option(16, "translation clusters")
+    k2: int = _option(4, "direction clusters per translation cluster")
+    inside: bool = _option(False, "also inside grasps (fingers opening outwards)")
+    collision: str = _option("swept", "collision model", choices=COLLISION_MODES)
+    seed: int = _option(0, "seed of the sampling and the clustering")
+    # criterion (e) needs the part's mass: given, or its density times the mesh volume
+    mass_kg: float | None = _option(
+        None, "the part's mass, kg (criterion (e) and --validate)", flag="--mass", exclusive="mass"
+    )
+    density: float | None = _option(None, "the part's density, kg/m^3 (mass = density x volume)", exclusive="mass")
+    accel: float = _option(
+        STANDARD_GRAVITY, "acceleration beyond gravity a held part resists in every direction, m/s^2"
+    )
+    hold: str = _option(
+        "any", "criterion (e): any (needs the mass and the gripper's grip_force) or off", choices=HOLD_MODES
+    )
+    position_tolerance: float = _option(
+        1.0e-3, "criterion (c) holds for every surface normal within this distance of a contact, m"
+    )
 
     def __post_init__(self) -> None:
         _int(self, "points", 100, 1_000_000)
@@ -83,12 +105,8 @@ class Params:
             raise InvalidParameterError("give mass_kg or density, not both", field="density")
         _num(self, "accel", lo=0.0, hi=1_000.0)
         _num(self, "position_tolerance", lo=0.0, hi=0.05)
-        if self.hold not in HOLD_MODES:
-            raise InvalidParameterError(f"hold must be one of {', '.join(HOLD_MODES)}, got {self.hold!r}", field="hold")
-        if self.collision not in COLLISION_MODES:
-            raise InvalidParameterError(
-                f"collision must be one of {', '.join(COLLISION_MODES)}, got {self.collision!r}", field="collision"
-            )
+        _choice(self, "hold")
+        _choice(self, "collision")
 
     @classmethod
     def from_dict(cls, data: dict[str, Any] | None) -> Params:
@@ -117,8 +135,14 @@ class QualityOptions:
     its cluster tried in place of a grasp that fails the simulation; `sim_workers`: simulation processes (None: the
     CPUs)."""
 
-    select: str = "medoid"
-    validate: bool = False
+    select: str = _option(
+        "medoid",
+        "medoid (the paper) or the best-scoring member near each medoid (docs/QUALITY.md)",
+        choices=SELECT_MODES,
+    )
+    validate: bool = _option(
+        False, "simulate every exported grasp in MuJoCo (needs the part's mass and the gripper's grip_force)"
+    )
     repair_limit: int = 4
     sim_workers: int | None = None
 
@@ -127,10 +151,7 @@ class QualityOptions:
     JOB_OPTIONS: ClassVar[tuple[str, ...]] = ("validate", "select")
 
     def __post_init__(self) -> None:
-        if self.select not in SELECT_MODES:
-            raise InvalidParameterError(
-                f"select must be one of {', '.join(SELECT_MODES)}, got {self.select!r}", field="select"
-            )
+        _choice(self, "select")
         if not isinstance(self.validate, bool):
             raise InvalidParameterError(f"validate must be true or false, got {self.validate!r}", field="validate")
         r = self.repair_limit
@@ -163,6 +184,13 @@ def _int(p: Params, name: str, lo: int, hi: int) -> None:
         raise InvalidParameterError(f"{name} must be an integer, got {v!r}", field=name)
     if not lo <= v <= hi:
         raise InvalidParameterError(f"{name} must be between {lo} and {hi}, got {v}", field=name)
+
+
+def _choice(p: Params | QualityOptions, name: str) -> None:
+    """One of the field's `choices` (its metadata)."""
+    v, choices = getattr(p, name), p.__dataclass_fields__[name].metadata["choices"]
+    if v not in choices:
+        raise InvalidParameterError(f"{name} must be one of {', '.join(choices)}, got {v!r}", field=name)
 
 
 def _num(p: Params, name: str, *, lo: float, hi: float, lo_open: bool = False) -> None:

@@ -12,6 +12,7 @@ import pytest
 import trimesh
 
 from graspgen.cli import DEMO_GRIPPER, main
+from graspgen.params import COLLISION_MODES, HOLD_MODES, SELECT_MODES, Params, QualityOptions
 
 SHARED = Path(__file__).resolve().parents[2].parent / "shared" / "meshes"
 
@@ -133,6 +134,37 @@ def test_bad_parameters_exit_2(files, capsys, args, message):
         ["generate", mesh, "--units", "mm", "--gripper", gripper, "--out", tmp / "g.json", *args], capsys
     )
     assert code == 2 and message in err
+    assert not (tmp / "g.json").exists()
+
+
+def test_run_options_are_the_params_fields_with_their_defaults():
+    from graspgen.cli import _parser, _quality_kwargs, _run_kwargs
+
+    for command in (["generate", "part.stl", "--gripper", "g.json", "--out", "o.json"], ["demo"]):
+        args = _parser().parse_args(command)
+        assert Params(**_run_kwargs(args)) == Params()
+        assert QualityOptions(**_quality_kwargs(args)) == QualityOptions()
+    args = _parser().parse_args(["demo", "--mass", "0.2", "--position-tolerance", "0", "--inside", "--k2", "3"])
+    assert Params(**_run_kwargs(args)) == Params(mass_kg=0.2, position_tolerance=0.0, inside=True, k2=3)
+
+
+@pytest.mark.parametrize(
+    "flag, modes", [("--collision", COLLISION_MODES), ("--hold", HOLD_MODES), ("--select", SELECT_MODES)]
+)
+def test_choices_are_the_modules_own(files, capsys, flag, modes):
+    tmp, mesh, gripper = files
+    code, out, err = _run(
+        ["generate", mesh, "--units", "mm", "--gripper", gripper, "--out", tmp / "g.json", flag, "x"], capsys
+    )
+    assert code == 2 and "invalid choice" in err and err.count("\n") == 1
+    assert all(repr(m) in err for m in modes)
+
+
+def test_mass_and_density_exclude_each_other(files, capsys):
+    tmp, mesh, gripper = files
+    argv = ["generate", mesh, "--units", "mm", "--gripper", gripper, "--out", tmp / "g.json"]
+    code, out, err = _run([*argv, "--mass", "0.1", "--density", "1000"], capsys)
+    assert code == 2 and "not allowed with argument --mass" in err and err.count("\n") == 1
     assert not (tmp / "g.json").exists()
 
 
