@@ -10,7 +10,7 @@ from pydantic import ConfigDict, Field
 from sqlalchemy.orm import Session
 
 from graspgen.errors import InvalidParameterError
-from graspgen.params import Params
+from graspgen.params import Params, QualityOptions
 from services.api.schemas import ID_MAX, PARAMS_DOC, NoNulModel
 from services.common.models import GraspSet as GraspSetRow
 
@@ -85,7 +85,7 @@ def run(ctx: RunContext) -> GraspSet:
     npz = ctx.storage.download(inp.source_candidates_key, ctx.tmp / "source-candidates.npz")
     previous = json.loads(ctx.storage.get_bytes(inp.source_export_key))
     quality = given_kwargs(p, QUALITY_PARAMS)
-    if quality.get("validate") or quality.get("select", "medoid") != "medoid":
+    if QualityOptions(**quality).needs_part:
         # validation and quality scoring need the part; recluster loads it in metres from `units`
         quality.update(mesh=str(ctx.download_part()), units=inp.units)
     return graspgen.recluster(

@@ -5,34 +5,20 @@ from __future__ import annotations
 
 from typing import Any
 
-from graspgen.errors import InvalidParameterError
+from graspgen.params import QualityOptions
 
 __all__ = ["QUALITY_PARAMS", "split_quality", "given_kwargs"]
 
 #: job params beyond graspgen.Params: keyword arguments of graspgen.generate / recluster
-QUALITY_PARAMS = ("validate", "select")
+QUALITY_PARAMS = QualityOptions.JOB_OPTIONS
 
 
 def split_quality(given: dict[str, Any] | None) -> tuple[dict[str, Any], dict[str, Any]]:
-    """(core params, quality params) of a job's params; quality params are checked here so that a bad value is a
-    422 at submission. Only non-default values are kept: `validate` only when true, `select` only when not "medoid".
-    `density` is a core parameter (graspgen.Params: criterion (e) and validation)."""
-    from graspgen.quality import SELECT_MODES
-
-    core = dict(given or {})
-    q = {k: core.pop(k) for k in QUALITY_PARAMS if k in core}
-    validate = q.get("validate", False)
-    if not isinstance(validate, bool):
-        raise InvalidParameterError(f"validate must be true or false, got {validate!r}", field="validate")
-    select_ = q.get("select", "medoid")
-    if not isinstance(select_, str) or select_ not in SELECT_MODES:
-        raise InvalidParameterError(f"select must be one of {', '.join(SELECT_MODES)}, got {select_!r}", field="select")
-    out: dict[str, Any] = {}
-    if validate:
-        out["validate"] = True
-    if select_ != "medoid":
-        out["select"] = select_
-    return core, out
+    """(core params, quality params) of a job's params; quality params are checked here (graspgen's QualityOptions)
+    so that a bad value is a 422 at submission. Only non-default values are kept: `validate` only when true, `select`
+    only when not "medoid". `density` is a core parameter (graspgen.Params: criterion (e) and validation)."""
+    core, options = QualityOptions.split_job(given)
+    return core, options.job_dict()
 
 
 def given_kwargs(params: dict[str, Any], names: tuple[str, ...]) -> dict[str, Any]:
