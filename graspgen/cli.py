@@ -167,13 +167,7 @@ def _preview_of(mesh_path: str, units: str):
         from .parts import load_part
         from .render import render_grasp_set
 
-        part = load_part(mesh_path, units=units)
-        mesh = part.mesh
-        if mesh is None:
-            import trimesh
-
-            mesh = trimesh.convex.convex_hull(part.points)
-        return render_grasp_set(mesh, result.to_json())
+        return render_grasp_set(load_part(mesh_path, units=units).surface_mesh(), result.to_json())
 
     return preview
 
@@ -192,13 +186,7 @@ def _render(args: argparse.Namespace) -> int:
         raise GraspgenError(f"cannot read grasp set {args.grasps}: {exc}") from None
     if not isinstance(export, dict) or "grasps" not in export or "gripper" not in export:
         raise GraspgenError(f"{args.grasps} is not a grasp_set/1 export")
-    part = load_part(args.mesh, units=args.units)
-    if part.mesh is None:
-        import trimesh
-
-        mesh = trimesh.convex.convex_hull(part.points)
-    else:
-        mesh = part.mesh
+    mesh = load_part(args.mesh, units=args.units).surface_mesh()
     write_atomic(args.out, render_grasp_set(mesh, export, size=size))
     print(f"wrote {args.out} ({size[0]}x{size[1]}, {len(export['grasps'])} grasps)")
     return 0

@@ -91,6 +91,13 @@ class Part:
     def is_point_cloud(self) -> bool:
         return self.mesh is None
 
+    def surface_mesh(self) -> trimesh.Trimesh:
+        """The part's surface as triangles (metres): its mesh, or for a point cloud, which has no surface of its
+        own, the convex hull of its points (what previews draw and the validation simulates)."""
+        if self.mesh is not None:
+            return self.mesh
+        return trimesh.convex.convex_hull(self.points)
+
 
 @dataclass(frozen=True)
 class _Raw:

@@ -757,12 +757,10 @@ def _validate(cands, labels, selected, clusters, spec, mu, params, extras: _Extr
 
     report("validate", 0.0)
     part = extras.part
-    if part.mesh is not None:
-        mesh, note = part.mesh, None
-    else:
-        mesh = trimesh.convex.convex_hull(np.asarray(part.points))
+    note = None
+    if part.is_point_cloud:
         note = "a point cloud has no surface to simulate: simulated as the convex hull of its points"
-    sim_part = physics.prepare_part(mesh, spec, friction=mu, mass_kg=extras.mass_kg, seed=params.seed)
+    sim_part = physics.prepare_part(part.surface_mesh(), spec, friction=mu, mass_kg=extras.mass_kg, seed=params.seed)
     report("validate", 0.1)
     widths = cands.widths
     run = lambda idx: physics.simulate_grasps(  # noqa: E731

@@ -56,14 +56,11 @@ def render_png(
     """Draw one preview (runs in a render process): the part from its stored bytes, the export's grippers."""
     import json
 
-    import trimesh
-
     from graspgen.parts import load_part
     from graspgen.render import render_grasp_set
 
     part = load_part(part_bytes, units=units, file_type=file_type)
-    mesh = part.mesh if part.mesh is not None else trimesh.convex.convex_hull(part.points)
-    return render_grasp_set(mesh, json.loads(export_json), size=size)
+    return render_grasp_set(part.surface_mesh(), json.loads(export_json), size=size)
 
 
 class PreviewRenderer:

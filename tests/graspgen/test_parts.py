@@ -338,6 +338,19 @@ def test_estimated_normals_are_outward_on_a_non_convex_cloud():
     assert np.median(cos) > 0.99
 
 
+def test_surface_mesh_is_the_mesh_or_the_convex_hull_of_a_cloud(winding_numbers):
+    box = load_part(trimesh.creation.box(extents=(0.01, 0.02, 0.03)), units="m")
+    assert box.surface_mesh() is box.mesh
+    points, _ = _torus_cloud(n=1500)
+    cloud = load_part(_npz(points=points), units="m", file_type="npz")
+    hull = cloud.surface_mesh()
+    assert hull.is_watertight and hull.volume > 0
+    assert {tuple(v) for v in hull.vertices} <= {tuple(p) for p in cloud.points}  # its corners are cloud points
+    # every point lies inside or on the hull, and the torus' hole is covered (a hull, not a reconstruction)
+    assert (winding_numbers(hull, cloud.points * 0.999) > 0.5).all()
+    assert winding_numbers(hull, np.zeros((1, 3)))[0] > 0.5
+
+
 def test_given_normals_are_kept():
     points, radial = _sphere_cloud(n=500)
     rng = np.random.default_rng(5)

@@ -341,3 +341,32 @@ def test_streaming_pairs_through_collision_in_blocks_changes_nothing(monkeypatch
     assert [g["pose"] for g in whole.grasps] == [g["pose"] for g in blocked.grasps]
     coll = [f for s, f in seen if s == "collision"]
     assert len(coll) >= 11 and coll == sorted(coll) and coll[-1] == 1.0
+
+
+def test_a_point_cloud_is_validated_as_the_convex_hull_of_its_points(monkeypatch):
+    from graspgen import physics
+
+    box = _box()
+    points, faces = trimesh.sample.sample_surface_even(box, 3000, seed=0)
+    part = load_part(_npz_bytes(points=points, normals=box.face_normals[faces]), units="m", file_type="npz")
+    simulated = []
+    prepare = physics.prepare_part
+
+    def spy(mesh, *args, **kwargs):
+        simulated.append(mesh)
+        return prepare(mesh, *args, **kwargs)
+
+    monkeypatch.setattr(physics, "prepare_part", spy)
+    gs = graspgen.generate(part, GRIPPER | {"grip_force": 20.0}, points=800, k1=2, k2=1, validate=True, mass_kg=0.2)
+    (mesh,) = simulated
+    assert mesh.is_watertight and mesh.volume == pytest.approx(box.volume, rel=0.02)
+    note = "a point cloud has no surface to simulate: simulated as the convex hull of its points"
+    assert f"validation: {note}" in gs.stats["warnings"] and note in gs.stats["validation"]["part"]["note"]
+
+
+def _npz_bytes(**arrays) -> bytes:
+    import io
+
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    return buf.getvalue()
