@@ -262,8 +262,10 @@ def test_bad_hold_inputs_are_refused():
 # -- mesh-exact collision ------------------------------------------------------------------------------------------
 
 
-def _region_grid(gripper, width, per_axis=7):
-    """Points filling each of the gripper's boxes (criterion (d)'s `swept` regions) in the grasp frame."""
+def _region_grid(gripper, width, reach=0.0, per_axis=7):
+    """Points filling each of the gripper's boxes (criterion (d)'s `swept` regions) in the grasp frame: the fingers'
+    travel, the palm and, with `reach`, the approach path behind the fingers (built here from the spec, not from
+    graspgen.collision)."""
     g = graspgen.GripperSpec.from_dict(gripper)
     t, m = g.finger_thickness, 1e-3
     o = min(width + g.pregrasp_clearance, g.stroke)
@@ -274,6 +276,9 @@ def _region_grid(gripper, width, per_axis=7):
     if palm is not None:
         c, e = np.asarray(palm.center), np.asarray(palm.extents) / 2
         boxes.append((tuple(c - e), tuple(c + e)))
+    if reach > 0:  # the open fingers and the gripper's body come in along +Z
+        px, py = g.stroke / 2 + t, max(g.palm_width if palm is not None else 0.0, g.finger_width) / 2
+        boxes.append(((-px, -py, -hz - reach), (px, py, -hz)))
     out = []
     for lo, hi in boxes:
         axes = [np.linspace(lo[k], hi[k], per_axis) for k in range(3)]
@@ -283,7 +288,7 @@ def _region_grid(gripper, width, per_axis=7):
 
 def _oracle_clear(mesh, dense, T, width, gripper):
     """No grid point of the boxes inside the part, and no dense surface point inside a box."""
-    grid, boxes = _region_grid(gripper, width)
+    grid, boxes = _region_grid(gripper, width, reach=float(np.linalg.norm(mesh.extents)))
     world = grid @ T[:3, :3].T + T[:3, 3]
     if mesh.contains(world).any():
         return False
@@ -334,6 +339,38 @@ def test_mesh_check_finds_a_feature_between_samples():
     assert by_points[0, palm_below].all() and exact[0, palm_below].all()
     # exact never frees what the points blocked
     assert not np.any(exact & ~by_points)
+
+
+def test_the_approach_behind_the_palm_is_checked():
+    """A block held across its 20 mm faces, with a second block 50-60 mm behind the contacts: beyond the palm box
+    (which ends 35 mm behind), so the static boxes call the rolls with the palm towards it free, but the gripper
+    coming in along +Z passes through it. With the part's reach both the point test and the triangles block those
+    rolls, and only those; a grasp through a ring's eye is the real case (the IPA ring screw)."""
+    from graspgen.collision import approach_reach, free_rolls
+
+    base = trimesh.creation.box(extents=(0.02, 0.03, 0.02))
+    behind = trimesh.creation.box(extents=(0.04, 0.03, 0.01))
+    behind.apply_translation((0.0, 0.0, -0.055))
+    mesh = trimesh.util.concatenate([base, behind])
+    pts, nrm = _sample(mesh, 4000)
+    spec = graspgen.GripperSpec.from_dict(GRIPPER)
+    mid, axis, width = np.array([[0.0, 0.0, 0.0]]), np.array([[1.0, 0.0, 0.0]]), np.array([0.02])
+    inside = np.array([False])
+    frames = grasp_frames(np.repeat(mid, 16, 0), np.repeat(axis, 16, 0), 2 * np.pi * np.arange(16) / 16)
+    palm_down = frames[:, 2, 2] > 0.9  # the grasp's +Z points up: the gripper comes from below, through the block
+    palm_up = frames[:, 2, 2] < -0.9
+    static = free_rolls(pts, nrm, mid, axis, width, inside, collision_model(spec, "swept"), 16)
+    assert static[0, palm_down].all() and static[0, palm_up].all()
+    reach = approach_reach(pts)
+    assert reach >= np.linalg.norm(mesh.extents)
+    model = collision_model(spec, "swept", reach=reach)
+    by_points = free_rolls(pts, nrm, mid, axis, width, inside, model, 16)
+    assert not by_points[0, palm_down].any() and by_points[0, palm_up].all()
+    tree = meshtree.build_tree(mesh.vertices, mesh.faces)
+    exact = meshtree.mesh_free_rolls(tree, mid, axis, width, inside, static, model)
+    assert not exact[0, palm_down].any() and exact[0, palm_up].all()
+    # the paper's static test knows no approach
+    assert collision_model(spec, "paper", reach=reach).palm is None
 
 
 def test_cli_mass_and_hold_options(tmp_path, capsys):
