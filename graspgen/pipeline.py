@@ -107,10 +107,139 @@ def generate(
         position_tolerance=position_tolerance,
     )
     mu = spec.friction if params.friction is None else params.friction
-    timings: dict[str, float] = {}
-    t_all = time.perf_counter()
+    run = _Run(spec, params, options, mu, report, timings={}, started=time.perf_counter())
 
-    report("load", 0.0)
+    loaded = _load(run, mesh_or_path, units, object_name)
+    surface = _sample(run, loaded.part)
+    pairs = _pairs(run, surface)
+    collided = _collide(run, surface, pairs)  # (c) within the position tolerance, (d) against the points
+    held = _hold_part(run, loaded, surface, collided.survivors)  # (e)
+    checked = _check_mesh(run, surface, pairs, held.survivors)  # (d) again, against the triangles
+    cands = _candidates(run, loaded, surface, pairs, checked.survivors)
+    stats = _stats(run, loaded, surface, pairs, collided, held, checked, cands)
+
+    part = loaded.part
+    obj = {
+        "name": object_name or part.name,
+        "version": object_version,
+        "sha256": part.sha256,
+        "source_units": part.source_units,
+    }
+    extras = _Extras(options, part, loaded.mass_kg, (surface.points, surface.normals))
+    params = replace(params, hold="any" if held.active else "off")
+    result = _cluster_and_export(cands, obj, spec, params, mu, stats, report, run.started, list(part.warnings), extras)
+    if recording is not None:
+        from .recording import record_run
+
+        record_run(recording, result, sample_points=surface.points, sample_normals=surface.normals)
+    return result
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# the stages of generate(), each a function of the run and the earlier stages' results
+
+
+@dataclass(frozen=True)
+class _Run:
+    """One generate() call's checked inputs, and where the stages report progress and record their timings."""
+
+    spec: GripperSpec
+    params: Params
+    options: QualityOptions
+    #: the friction coefficient the run uses: the parameter, else the gripper's
+    mu: float
+    report: Progress
+    #: stage -> seconds, in the order the stages ran (the export's stats.timings_s)
+    timings: dict[str, float]
+    started: float
+
+
+@dataclass(frozen=True)
+class _Loaded:
+    """The part in metres, its mass (kg; None when neither mass_kg nor density was given) and centre of mass."""
+
+    part: Part
+    mass_kg: float | None
+    #: why the mass is the convex hull's (an open mesh or a point cloud has no volume of its own)
+    mass_note: str | None
+    center_of_mass: np.ndarray  # (3,) metres
+
+
+@dataclass(frozen=True)
+class _Surface:
+    """The sampled surface in the pair grid's order, and what the exact checks need of the part's triangles."""
+
+    points: np.ndarray  # (k, 3) float64, metres
+    normals: np.ndarray  # (k, 3) float64, unit, outward
+    spacing: float  # mean nearest-neighbour distance, metres
+    min_spacing: float
+    tree: meshtree.MeshTree | None  # None for a point cloud
+    #: per point, the largest angle (rad) to a surface normal within the position tolerance; None: nothing near
+    spread: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class _Pairs:
+    """Criteria (a)-(c) counted over all pairs (the plan fills them in blocks), and the collision model."""
+
+    plan: antipodal.PairPlan
+    half_angle: float  # friction cone half-angle over the safety factor, rad
+    model: _collision.CollisionModel
+
+
+@dataclass(frozen=True)
+class _Survivors:
+    """Pairs (i, j: indices into the surface) that passed every criterion so far, with their free rolls."""
+
+    i: np.ndarray  # (n,) int64
+    j: np.ndarray  # (n,) int64
+    free: np.ndarray  # (n, R) bool
+    inside: np.ndarray  # (n,) bool
+    hold_margin: np.ndarray | None = None  # (n,) once criterion (e) ran
+
+    def __len__(self) -> int:
+        return len(self.i)
+
+    def keep(self, mask: np.ndarray, free: np.ndarray | None = None) -> _Survivors:
+        """The pairs where `mask` holds (with the free rolls `free` instead of their own when given)."""
+        margin = self.hold_margin[mask] if self.hold_margin is not None else None
+        rolls = self.free if free is None else free
+        return _Survivors(self.i[mask], self.j[mask], rolls[mask], self.inside[mask], margin)
+
+
+@dataclass(frozen=True)
+class _Collided:
+    survivors: _Survivors
+    #: pairs criterion (c) removed because a normal within the position tolerance leaves the cone
+    n_tolerance: int
+
+
+@dataclass(frozen=True)
+class _Held:
+    """Criterion (e): the survivors that hold the part (all of them when it did not run)."""
+
+    survivors: _Survivors
+    active: bool
+    removed: int
+    load_n: float | None
+    #: why (e) is off although asked for (no mass or no grip force)
+    warning: str | None
+    #: when (e) removed every candidate: what would make the best one hold
+    diagnosis: dict[str, Any] | None
+
+
+@dataclass(frozen=True)
+class _MeshChecked:
+    survivors: _Survivors
+    #: free rolls the triangles blocked, and the candidates left with none
+    removed_rolls: int
+    removed: int
+
+
+def _load(
+    run: _Run, mesh_or_path: str | os.PathLike | trimesh.Trimesh | Part, units: str | None, object_name: str | None
+) -> _Loaded:
+    run.report("load", 0.0)
     t0 = time.perf_counter()
     if isinstance(mesh_or_path, Part):
         part = mesh_or_path
@@ -118,13 +247,17 @@ def generate(
         if units is None:
             raise InvalidUnitsError("units are required (mm, cm, m or in)", field="units")
         part = load_part(mesh_or_path, units=units, name=object_name)
-    timings["load"] = time.perf_counter() - t0
-    mass, mass_note = _hold.part_mass(part, params.mass_kg, params.density)
-    if options.validate:
-        _check_validation_inputs(mass, spec)
-    report("load", 1.0)
+    run.timings["load"] = time.perf_counter() - t0
+    mass, mass_note = _hold.part_mass(part, run.params.mass_kg, run.params.density)
+    if run.options.validate:
+        _check_validation_inputs(mass, run.spec)
+    run.report("load", 1.0)
+    return _Loaded(part, mass, mass_note, quality.center_of_mass(part.mesh, part.points))
 
-    report("sample", 0.0)
+
+def _sample(run: _Run, part: Part) -> _Surface:
+    spec, params = run.spec, run.params
+    run.report("sample", 0.0)
     t0 = time.perf_counter()
     sample = sampling.sample_surface(part, params.points, seed=params.seed)
     cell = antipodal.pair_cell_size(spec.stroke, params.inside, spec.finger_thickness)
@@ -133,167 +266,46 @@ def generate(
     t1 = time.perf_counter()
     tree = meshtree.build_tree(part.mesh.vertices, part.mesh.faces) if part.mesh is not None else None
     spread = _normal_spread(tree, pts, nrm, params.position_tolerance)
-    timings["sample"] = time.perf_counter() - t0
-    timings["sample_mesh_tree"] = time.perf_counter() - t1
-    report("sample", 1.0)
+    run.timings["sample"] = time.perf_counter() - t0
+    run.timings["sample_mesh_tree"] = time.perf_counter() - t1
+    run.report("sample", 1.0)
+    return _Surface(pts, nrm, float(sample.spacing), float(sample.min_spacing), tree, spread)
 
-    report("pairs", 0.0)
+
+def _pairs(run: _Run, surface: _Surface) -> _Pairs:
+    spec, params = run.spec, run.params
+    run.report("pairs", 0.0)
     t0 = time.perf_counter()
-    half_angle = antipodal.cone_half_angle_rad(mu, params.safety_factor)
     plan = antipodal.pair_plan(
-        pts,
-        nrm,
+        surface.points,
+        surface.normals,
         stroke=spec.stroke,
         min_width=spec.min_width,
-        friction=mu,
+        friction=run.mu,
         safety_factor=params.safety_factor,
         inside=params.inside,
         finger_thickness=spec.finger_thickness,
     )
-    timings["pairs"] = time.perf_counter() - t0
-    report("pairs", 1.0)
-
-    report("collision", 0.0)
-    ci, cj, free, inside, n_tolerance = _collide_in_blocks(
-        plan, pts, nrm, spec, params, timings, report, spread=spread, half_angle=half_angle
-    )
-    n_point_free = len(ci)
-
-    # criterion (e), then the mesh-exact check of the free rolls: both only on what is left
-    t0 = time.perf_counter()
-    com = quality.center_of_mass(part.mesh, part.points)
-    hold_on, hold_warning = _hold_active(params, spec, mass)
-    margins = None
-    hold_diag = None
-    n_hold = 0
-    if hold_on:
-        rho = _hold.torsion_radii(pts, nrm, _patch_radius(spec))
-        load = _hold.hold_load(mass, params.accel)
-        hold_args = dict(load=load, grip_force=spec.grip_force, friction=mu)
-        contacts_all = np.stack([pts[ci], pts[cj]], axis=1)
-        radii_all = np.stack([rho[ci], rho[cj]], axis=1)
-        margins = _hold.hold_margins(contacts_all, radii_all, com, floor=1.0, **hold_args)
-        keep = margins >= 1.0
-        n_hold = int(np.sum(~keep))
-        if n_point_free and not keep.any():
-            best = float(np.max(_hold.hold_margins(contacts_all, radii_all, com, **hold_args)))
-            hold_diag = _hold_diagnosis(best, spec, mass, params)
-        ci, cj, free, inside, margins = ci[keep], cj[keep], free[keep], inside[keep], margins[keep]
-    timings["hold"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    n_mesh_rolls = 0
-    if tree is not None and len(ci):
-        model = _collision.collision_model(spec, params.collision, reach=_collision.approach_reach(pts))
-        d = pts[cj] - pts[ci]
-        w = np.linalg.norm(d, axis=1)
-        exact = meshtree.mesh_free_rolls(tree, 0.5 * (pts[ci] + pts[cj]), d / w[:, None], w, inside, free, model)
-        n_mesh_rolls = int(free.sum() - exact.sum())
-        keep = exact.any(axis=1)
-        ci, cj, free, inside = ci[keep], cj[keep], exact[keep], inside[keep]
-        margins = margins[keep] if margins is not None else None
-    timings["collision_mesh"] = time.perf_counter() - t0
-    timings["collision"] += timings["collision_mesh"]
-
-    fm = antipodal.friction_margin_deg(pts, nrm, ci, cj, inside, half_angle)
-    contacts = np.stack([pts[ci], pts[cj]], axis=1).reshape(-1, 2, 3)
-    normals = np.stack([nrm[ci], nrm[cj]], axis=1).reshape(-1, 2, 3)
-    # every candidate is scored (quality.py): it orders the export, and `best-near-medoid` selects by it. The
-    # contacts are sample points, so the patch flatness is computed once per point
-    flat = quality.point_flatness(pts, nrm, _patch_radius(spec))
-    terms = quality.quality_terms(
-        contacts,
-        normals,
-        fm,
-        half_angle_deg=quality.half_angle_deg(mu, params.safety_factor),
-        center_of_mass=com,
-        length_scale=_length_scale(part),
-        flatness=np.stack([flat[ci], flat[cj]], axis=1),
-    )
-    cands = Candidates(
-        contacts=contacts,
-        normals=normals,
-        free_rolls=free,
-        roll_angles_rad=roll_angles_rad(params.rolls),
-        friction_margin_deg=fm,
-        inside=inside,
-        labels=np.full((len(ci), 2), -1, dtype=np.int32),
-        medoids=np.zeros(0, dtype=np.int64),
-        quality_terms=terms,
-        center_of_mass=com,
-        hold_margin=margins,
-    )
-    # the mesh-exact check ran after (e): what it removed counts as collision, with the point test's
-    n_mesh = n_point_free - n_hold - len(cands)
-    rejected = {
-        "stroke": plan.rejected_stroke,
-        "outside": plan.rejected_outside,
-        "friction": plan.rejected_friction + n_tolerance,
-        "collision": plan.accepted - n_tolerance - n_point_free + n_mesh,
-        "hold": n_hold,
-    }
-    stats: dict[str, Any] = {
-        "points": len(pts),
-        "pairs_total": plan.pairs_total,
-        "rejected": rejected,
-        "candidates": len(cands),
-        "timings_s": timings,
-        "spacing_mean": float(sample.spacing),
-        "spacing_min": float(sample.min_spacing),
-        "watertight": bool(part.watertight),
-        "warnings": list(part.warnings),
-        "exact": {
-            "friction_position_tolerance": n_tolerance,
-            "collision_mesh_rolls": n_mesh_rolls,
-            "collision_mesh_candidates": n_mesh,
-        },
-    }
-    if hold_on:
-        stats["hold"] = {
-            "mass_kg": mass,
-            "load_n": load,
-            "grip_force": spec.grip_force,
-            "friction": mu,
-            "center_of_mass": [float(v) for v in com],
-            "min_margin": float(np.min(margins)) if len(cands) else None,
-        }
-    for note in (hold_warning, mass_note):
-        if note:
-            stats["warnings"].append(note)
-    if len(cands) == 0:
-        stats["empty_reason"] = _empty_reason(rejected, plan.pairs_total, spec, params, mu, pts, nrm, hold_diag)
-
-    obj = {
-        "name": object_name or part.name,
-        "version": object_version,
-        "sha256": part.sha256,
-        "source_units": part.source_units,
-    }
-    extras = _Extras(options, part, mass, (pts, nrm))
-    params = replace(params, hold="any" if hold_on else "off")
-    result = _cluster_and_export(cands, obj, spec, params, mu, stats, report, t_all, list(part.warnings), extras)
-    if recording is not None:
-        from .recording import record_run
-
-        record_run(recording, result, sample_points=pts, sample_normals=nrm)
-    return result
+    run.timings["pairs"] = time.perf_counter() - t0
+    run.report("pairs", 1.0)
+    model = _collision.collision_model(spec, params.collision, reach=_collision.approach_reach(surface.points))
+    return _Pairs(plan, antipodal.cone_half_angle_rad(run.mu, params.safety_factor), model)
 
 
-def _collide_in_blocks(plan, pts, nrm, spec: GripperSpec, params: Params, timings, report, *, spread, half_angle):
-    """Criterion (c) with the position tolerance, then (d), for every pair of `plan`, streamed in blocks of
+def _collide(run: _Run, surface: _Surface, pairs: _Pairs) -> _Collided:
+    """Criterion (c) with the position tolerance, then (d), for every pair of the plan, streamed in blocks of
     `_PAIR_BLOCK` pairs.
 
-    Returns the surviving pairs (ci, cj), their free-roll masks and inside flags, in the order of
-    `antipodal_pairs`, and how many pairs the position tolerance removed. Filling the pairs counts as the pairs
-    stage, the rest as the collision stage.
+    The survivors come in the order of `antipodal_pairs`. Filling the pairs counts as the pairs stage, the rest as
+    the collision stage.
     """
-    model = _collision.collision_model(spec, params.collision, reach=_collision.approach_reach(pts))
+    run.report("collision", 0.0)
+    plan, rolls = pairs.plan, run.params.rolls
+    pts, nrm = surface.points, surface.normals
     m = plan.accepted
     # progress (and a cancel) at least every m / _COLLISION_BATCHES pairs, within the longest stage
     step = max(-(-m // _COLLISION_BATCHES), 1)
-    kept_i: list[np.ndarray] = []
-    kept_j: list[np.ndarray] = []
-    kept_free: list[np.ndarray] = []
-    kept_inside: list[np.ndarray] = []
+    kept: list[_Survivors] = []
     n_kept = 0
     n_tolerance = 0
     t_fill = t_coll = 0.0
@@ -303,24 +315,24 @@ def _collide_in_blocks(plan, pts, nrm, spec: GripperSpec, params: Params, timing
         p0 = int(plan.offsets[r0])
         block = len(bi)
         pos = np.arange(block)  # each pair's place in the block, for progress
-        if spread is not None:
-            ok = antipodal.within_spread(pts, nrm, bi, bj, bins, spread, half_angle)
+        if surface.spread is not None:
+            ok = antipodal.within_spread(pts, nrm, bi, bj, bins, surface.spread, pairs.half_angle)
             if not ok.all():
                 n_tolerance += int(np.sum(~ok))
                 bi, bj, bins, pos = bi[ok], bj[ok], bins[ok], pos[ok]
         t_fill += time.perf_counter() - t0
         t0 = time.perf_counter()
-        free = np.zeros((len(bi), params.rolls), dtype=bool)
+        free = np.zeros((len(bi), rolls), dtype=bool)
         # segment boundaries: the block's ends and every multiple of `step` inside it
         cuts = np.unique(np.r_[0, np.searchsorted(pos, np.arange(-p0 % step, block, step)), len(bi)])
         for lo, hi in zip(cuts[:-1], cuts[1:], strict=True):
             sl = slice(int(lo), int(hi))
-            free[sl] = _collision.free_rolls_of_pairs(pts, bi[sl], bj[sl], bins[sl], model, params.rolls, normals=nrm)
-            report("collision", (p0 + (block if hi == len(bi) else int(pos[hi]))) / m)
+            free[sl] = _collision.free_rolls_of_pairs(pts, bi[sl], bj[sl], bins[sl], pairs.model, rolls, normals=nrm)
+            run.report("collision", (p0 + (block if hi == len(bi) else int(pos[hi]))) / m)
         if len(bi) == 0 and m:
-            report("collision", (p0 + block) / m)
-        keep = free.any(axis=1)
-        n_kept += int(keep.sum())
+            run.report("collision", (p0 + block) / m)
+        block_kept = _Survivors(bi, bj, free, bins).keep(free.any(axis=1))
+        n_kept += len(block_kept)
         if n_kept > MAX_CANDIDATES:
             raise InvalidParameterError(
                 f"more than {MAX_CANDIDATES:,} collision-free candidates at {len(pts):,} points (after "
@@ -328,20 +340,155 @@ def _collide_in_blocks(plan, pts, nrm, spec: GripperSpec, params: Params, timing
                 f"fewer points (candidates grow with the square of the points)",
                 field="points",
             )
-        kept_i.append(bi[keep])
-        kept_j.append(bj[keep])
-        kept_free.append(free[keep])
-        kept_inside.append(bins[keep])
+        kept.append(block_kept)
         t_coll += time.perf_counter() - t0
-    timings["pairs"] += t_fill
-    timings["collision"] = t_coll
+    run.timings["pairs"] += t_fill
+    run.timings["collision"] = t_coll
     if m == 0:
-        report("collision", 1.0)  # otherwise the last segment reported it
-    if not kept_i:
+        run.report("collision", 1.0)  # otherwise the last segment reported it
+    if not kept:
         e = np.zeros(0, dtype=np.int64)
-        return e, e.copy(), np.zeros((0, params.rolls), dtype=bool), np.zeros(0, dtype=bool), n_tolerance
+        return _Collided(
+            _Survivors(e, e.copy(), np.zeros((0, rolls), dtype=bool), np.zeros(0, dtype=bool)), n_tolerance
+        )
     cat = np.concatenate
-    return cat(kept_i), cat(kept_j), cat(kept_free), cat(kept_inside), n_tolerance
+    survivors = _Survivors(*(cat([getattr(s, k) for s in kept]) for k in ("i", "j", "free", "inside")))
+    return _Collided(survivors, n_tolerance)
+
+
+def _hold_part(run: _Run, loaded: _Loaded, surface: _Surface, survivors: _Survivors) -> _Held:
+    """Criterion (e) on the pairs that passed (a)-(d) against the points (CONTRACT.md, hold.py)."""
+    spec, params = run.spec, run.params
+    t0 = time.perf_counter()
+    com = loaded.center_of_mass
+    active, warning = _hold_active(params, spec, loaded.mass_kg)
+    load = diagnosis = None
+    removed = 0
+    if active:
+        pts, s = surface.points, survivors
+        rho = _hold.torsion_radii(pts, surface.normals, _patch_radius(spec))
+        load = _hold.hold_load(loaded.mass_kg, params.accel)
+        hold_args = dict(load=load, grip_force=spec.grip_force, friction=run.mu)
+        contacts = np.stack([pts[s.i], pts[s.j]], axis=1)
+        radii = np.stack([rho[s.i], rho[s.j]], axis=1)
+        margins = _hold.hold_margins(contacts, radii, com, floor=1.0, **hold_args)
+        keep = margins >= 1.0
+        removed = int(np.sum(~keep))
+        if len(s) and not keep.any():
+            best = float(np.max(_hold.hold_margins(contacts, radii, com, **hold_args)))
+            diagnosis = _hold_diagnosis(best, spec, loaded.mass_kg, params)
+        survivors = replace(s, hold_margin=margins).keep(keep)
+    run.timings["hold"] = time.perf_counter() - t0
+    return _Held(survivors, active, removed, load, warning, diagnosis)
+
+
+def _check_mesh(run: _Run, surface: _Surface, pairs: _Pairs, survivors: _Survivors) -> _MeshChecked:
+    """Every free roll tested again against the part's triangles (mesh-exact criterion (d); meshtree.py), only on
+    what (e) left. A point cloud has no triangles: its survivors stay as they are."""
+    t0 = time.perf_counter()
+    removed_rolls = 0
+    checked = survivors
+    if surface.tree is not None and len(survivors):
+        pts, s = surface.points, survivors
+        d = pts[s.j] - pts[s.i]
+        w = np.linalg.norm(d, axis=1)
+        mid = 0.5 * (pts[s.i] + pts[s.j])
+        exact = meshtree.mesh_free_rolls(surface.tree, mid, d / w[:, None], w, s.inside, s.free, pairs.model)
+        removed_rolls = int(s.free.sum() - exact.sum())
+        checked = s.keep(exact.any(axis=1), free=exact)
+    run.timings["collision_mesh"] = time.perf_counter() - t0
+    run.timings["collision"] += run.timings["collision_mesh"]
+    return _MeshChecked(checked, removed_rolls, len(survivors) - len(checked))
+
+
+def _candidates(run: _Run, loaded: _Loaded, surface: _Surface, pairs: _Pairs, s: _Survivors) -> Candidates:
+    """The survivors as candidates, each scored (quality.py): the score orders the export, and `best-near-medoid`
+    selects by it."""
+    spec, params = run.spec, run.params
+    pts, nrm = surface.points, surface.normals
+    fm = antipodal.friction_margin_deg(pts, nrm, s.i, s.j, s.inside, pairs.half_angle)
+    contacts = np.stack([pts[s.i], pts[s.j]], axis=1).reshape(-1, 2, 3)
+    normals = np.stack([nrm[s.i], nrm[s.j]], axis=1).reshape(-1, 2, 3)
+    # the contacts are sample points, so the patch flatness is computed once per point
+    flat = quality.point_flatness(pts, nrm, _patch_radius(spec))
+    terms = quality.quality_terms(
+        contacts,
+        normals,
+        fm,
+        half_angle_deg=quality.half_angle_deg(run.mu, params.safety_factor),
+        center_of_mass=loaded.center_of_mass,
+        length_scale=_length_scale(loaded.part),
+        flatness=np.stack([flat[s.i], flat[s.j]], axis=1),
+    )
+    return Candidates(
+        contacts=contacts,
+        normals=normals,
+        free_rolls=s.free,
+        roll_angles_rad=roll_angles_rad(params.rolls),
+        friction_margin_deg=fm,
+        inside=s.inside,
+        labels=np.full((len(s), 2), -1, dtype=np.int32),
+        medoids=np.zeros(0, dtype=np.int64),
+        quality_terms=terms,
+        center_of_mass=loaded.center_of_mass,
+        hold_margin=s.hold_margin,
+    )
+
+
+def _stats(
+    run: _Run,
+    loaded: _Loaded,
+    surface: _Surface,
+    pairs: _Pairs,
+    collided: _Collided,
+    held: _Held,
+    checked: _MeshChecked,
+    cands: Candidates,
+) -> dict[str, Any]:
+    """The export's stats of the stages so far (clustering, selection and validation add theirs)."""
+    plan, part = pairs.plan, loaded.part
+    n_point_free = len(collided.survivors)
+    # the mesh-exact check ran after (e): what it removed counts as collision, with the point test's
+    rejected = {
+        "stroke": plan.rejected_stroke,
+        "outside": plan.rejected_outside,
+        "friction": plan.rejected_friction + collided.n_tolerance,
+        "collision": plan.accepted - collided.n_tolerance - n_point_free + checked.removed,
+        "hold": held.removed,
+    }
+    stats: dict[str, Any] = {
+        "points": len(surface.points),
+        "pairs_total": plan.pairs_total,
+        "rejected": rejected,
+        "candidates": len(cands),
+        "timings_s": run.timings,
+        "spacing_mean": surface.spacing,
+        "spacing_min": surface.min_spacing,
+        "watertight": bool(part.watertight),
+        "warnings": list(part.warnings),
+        "exact": {
+            "friction_position_tolerance": collided.n_tolerance,
+            "collision_mesh_rolls": checked.removed_rolls,
+            "collision_mesh_candidates": checked.removed,
+        },
+    }
+    if held.active:
+        stats["hold"] = {
+            "mass_kg": loaded.mass_kg,
+            "load_n": held.load_n,
+            "grip_force": run.spec.grip_force,
+            "friction": run.mu,
+            "center_of_mass": [float(v) for v in loaded.center_of_mass],
+            "min_margin": float(np.min(cands.hold_margin)) if len(cands) else None,
+        }
+    for note in (held.warning, loaded.mass_note):
+        if note:
+            stats["warnings"].append(note)
+    if len(cands) == 0:
+        stats["empty_reason"] = _empty_reason(
+            rejected, plan.pairs_total, run.spec, run.params, run.mu, surface.points, surface.normals, held.diagnosis
+        )
+    return stats
 
 
 def _normal_spread(tree, pts, nrm, tolerance: float) -> np.ndarray | None:
