@@ -58,3 +58,17 @@ def test_list_grippers_paginates(pg_service):
         if not cursor:
             break
     assert [n for n in names if n.startswith(prefix)] == [f"{prefix}-{i}" for i in range(3)]
+
+
+def test_concurrent_specs_under_one_new_name_number_their_versions_once(pg_service):
+    from concurrent.futures import ThreadPoolExecutor
+
+    name = slug("busy")
+    strokes = [0.08, 0.08, 0.09, 0.09, 0.1, 0.11]
+    with ThreadPoolExecutor(6) as pool:
+        rs = list(pool.map(lambda s: pg_service.gripper(name, stroke=s), strokes))
+    assert all(r.status_code in (200, 201) for r in rs), [r.text for r in rs]
+    version = {s: {r.json()["version"] for r, t in zip(rs, strokes, strict=True) if t == s} for s in set(strokes)}
+    assert all(len(v) == 1 for v in version.values())  # one spec, one version
+    assert sorted(v.pop() for v in version.values()) == [1, 2, 3, 4]
+    assert sum(r.status_code == 201 for r in rs) == 4

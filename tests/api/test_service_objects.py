@@ -150,3 +150,20 @@ def test_unknown_object_and_version_are_404(pg_service):
     pg_service.upload(name)
     assert pg_service.get(f"/v1/objects/{name}/versions/9").status_code == 404
     assert pg_service.get(f"/v1/objects/{name}/versions/9/file").status_code == 404
+
+
+def test_concurrent_uploads_under_one_new_name_number_their_versions_once(pg_service):
+    from concurrent.futures import ThreadPoolExecutor
+
+    same, different = slug("same"), slug("different")
+    with ThreadPoolExecutor(6) as pool:
+        same_bytes = list(pool.map(lambda _: pg_service.upload(same, box_stl()), range(6)))
+        sizes = [(10 + k, 20, 30) for k in range(6)]
+        other_bytes = list(pool.map(lambda e: pg_service.upload(different, box_stl(e)), sizes))
+    # the same bytes: one version, created once, returned to every other upload
+    assert sorted(r.status_code for r in same_bytes) == [200] * 5 + [201]
+    assert {r.json()["version"] for r in same_bytes} == {1}
+    # other bytes: each its own version, numbered without gaps or repeats
+    assert all(r.status_code == 201 for r in other_bytes), [r.text for r in other_bytes]
+    assert sorted(r.json()["version"] for r in other_bytes) == [1, 2, 3, 4, 5, 6]
+    assert pg_service.get(f"/v1/objects/{different}").json()["latest_version"] == 6

@@ -4,17 +4,14 @@ from __future__ import annotations
 
 from typing import Any
 
-from sqlalchemy import func, select
-from sqlalchemy.exc import IntegrityError
+from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from graspgen.gripper import GripperSpec
-from services.common import catalogue
 from services.common.jobs import sha256_json
-from services.common.models import Gripper, GripperVersion, utcnow
+from services.common.models import Gripper, GripperVersion
 
-from ..pagination import decode_cursor, fetch_page, next_link
-from ..problems import ApiError
+from .versioned import GRIPPERS, add_version, get_named, get_version, list_page, versions_of
 
 __all__ = ["create_gripper", "gripper_out", "get_gripper_version", "list_grippers", "version_out"]
 
@@ -41,48 +38,18 @@ def create_gripper(session: Session, data: Any) -> tuple[dict[str, Any], bool]:
     spec = GripperSpec.from_dict(data).to_dict()  # InvalidGripperError -> 422
     digest = sha256_json(spec)
     name = spec["name"]
-    for _ in range(3):
-        existing = _find(session, name, digest)
-        if existing is not None:
-            return version_out(name, existing), False
-        try:
-            g = session.execute(select(Gripper).where(Gripper.name == name).with_for_update()).scalar_one_or_none()
-            if g is None:
-                g = Gripper(name=name)
-                session.add(g)
-                session.flush()
-            latest = session.execute(
-                select(func.max(GripperVersion.version)).where(GripperVersion.gripper_id == g.id)
-            ).scalar_one_or_none()
-            v = GripperVersion(gripper_id=g.id, version=(latest or 0) + 1, spec=spec, spec_sha256=digest)
-            g.updated_at = utcnow()
-            session.add(v)
-            session.flush()
-            # sets for the older version are no longer "the newest" (a released one turns stale)
-            catalogue.refresh(session, gripper_id=g.id)
-            session.commit()
-            return version_out(name, v), True
-        except IntegrityError:
-            session.rollback()
-    raise ApiError(409, "conflict", "concurrent changes to this gripper; retry")
-
-
-def _gripper(session: Session, name: str) -> Gripper:
-    g = session.execute(select(Gripper).where(Gripper.name == name)).scalar_one_or_none()
-    if g is None:
-        raise ApiError(404, "not-found", f"no gripper named {name!r}")
-    return g
+    existing = _find(session, name, digest)
+    if existing is not None:
+        return version_out(name, existing), False
+    v, created = add_version(
+        session, GRIPPERS, name, {"spec": spec, "spec_sha256": digest}, existing=lambda: _find(session, name, digest)
+    )
+    return version_out(name, v), created
 
 
 def gripper_out(session: Session, name: str) -> dict[str, Any]:
-    g = _gripper(session, name)
-    versions = (
-        session.execute(
-            select(GripperVersion).where(GripperVersion.gripper_id == g.id).order_by(GripperVersion.version)
-        )
-        .scalars()
-        .all()
-    )
+    g = get_named(session, GRIPPERS, name)
+    versions = versions_of(session, GRIPPERS, g)
     return {
         "name": g.name,
         "latest_version": versions[-1].version if versions else 0,
@@ -95,32 +62,8 @@ def gripper_out(session: Session, name: str) -> dict[str, Any]:
 
 
 def get_gripper_version(session: Session, name: str, version: int) -> dict[str, Any]:
-    g = _gripper(session, name)
-    v = session.execute(
-        select(GripperVersion).where(GripperVersion.gripper_id == g.id, GripperVersion.version == version)
-    ).scalar_one_or_none()
-    if v is None:
-        raise ApiError(404, "not-found", f"gripper {name!r} has no version {version}")
-    return version_out(name, v)
+    return version_out(name, get_version(session, GRIPPERS, name, version))
 
 
 def list_grippers(session: Session, *, cursor: str | None, limit: int) -> dict[str, Any]:
-    key = decode_cursor(cursor, (str,))
-    latest = (
-        select(GripperVersion.gripper_id, func.max(GripperVersion.version).label("latest"))
-        .group_by(GripperVersion.gripper_id)
-        .subquery()
-    )
-    q = select(Gripper, latest.c.latest).join(latest, latest.c.gripper_id == Gripper.id)
-    if key:
-        q = q.where(Gripper.name > key[0])
-    rows, nxt = fetch_page(session, q.order_by(Gripper.name), limit, lambda r: [r[0].name])
-    items = [
-        {"name": g.name, "latest_version": v, "updated_at": g.updated_at, "links": {"self": f"/v1/grippers/{g.name}"}}
-        for g, v in rows
-    ]
-    return {
-        "items": items,
-        "next_cursor": nxt,
-        "links": {"next": next_link("/v1/grippers", nxt, limit)},
-    }
+    return list_page(session, GRIPPERS, cursor=cursor, limit=limit)

@@ -9,19 +9,18 @@ import tempfile
 from pathlib import Path
 from typing import Any, BinaryIO
 
-from sqlalchemy import func, select
-from sqlalchemy.exc import IntegrityError
+from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from graspgen.gripper import SLUG_PATTERN
 from graspgen.units import to_metres_scale
-from services.common import catalogue
-from services.common.models import ObjectModel, ObjectVersion, utcnow
+from services.common.models import ObjectModel, ObjectVersion
 from services.common.settings import Settings
 from services.common.storage import Storage
 
-from ..pagination import decode_cursor, fetch_page, next_link
 from ..problems import ApiError
+from . import versioned
+from .versioned import OBJECTS, add_version, get_named, list_page, versions_of
 
 __all__ = ["check_slug", "upload_object", "get_object", "get_version", "list_objects", "version_out", "object_out"]
 
@@ -129,45 +128,19 @@ def upload_object(
             path.read_bytes(), units=units, name=name, file_type=fmt, max_decoded_bytes=settings.max_decoded_bytes
         )
         blob = storage.put_file(path)
-    for _ in range(3):
-        try:
-            obj = session.execute(
-                select(ObjectModel).where(ObjectModel.name == name).with_for_update()
-            ).scalar_one_or_none()
-            if obj is None:
-                obj = ObjectModel(name=name)
-                session.add(obj)
-                session.flush()
-            latest = session.execute(
-                select(func.max(ObjectVersion.version)).where(ObjectVersion.object_id == obj.id)
-            ).scalar_one_or_none()
-            v = ObjectVersion(
-                object_id=obj.id,
-                version=(latest or 0) + 1,
-                sha256=digest,
-                units=units,
-                format=fmt,
-                size_bytes=size,
-                extents=[float(x) for x in part.extents],
-                watertight=bool(part.watertight),
-                warnings=[str(w) for w in (part.warnings or [])],
-                file_key=blob.key,
-                mass_kg=mass_kg,
-            )
-            obj.updated_at = utcnow()
-            session.add(v)
-            session.flush()
-            # sets for the older version are no longer "the newest" (a released one turns stale)
-            catalogue.refresh(session, object_id=obj.id)
-            session.commit()
-            return version_out(name, v), True
-        except IntegrityError:
-            # a concurrent upload took the name or the version number; the same bytes return its version
-            session.rollback()
-            existing = _find(session, name, digest, units)
-            if existing is not None:
-                return _same(name, existing, mass_kg), False
-    raise ApiError(409, "conflict", "concurrent uploads under this name; retry")
+    columns = {
+        "sha256": digest,
+        "units": units,
+        "format": fmt,
+        "size_bytes": size,
+        "extents": [float(x) for x in part.extents],
+        "watertight": bool(part.watertight),
+        "warnings": [str(w) for w in (part.warnings or [])],
+        "file_key": blob.key,
+        "mass_kg": mass_kg,
+    }
+    v, created = add_version(session, OBJECTS, name, columns, existing=lambda: _find(session, name, digest, units))
+    return (version_out(name, v), True) if created else (_same(name, v, mass_kg), False)
 
 
 #: the largest part mass accepted, kg (graspgen.Params takes the same range for a job's mass_kg)
@@ -203,20 +176,9 @@ def _same(name: str, existing: ObjectVersion, mass_kg: float | None) -> dict[str
     return version_out(name, existing)
 
 
-def _object(session: Session, name: str) -> ObjectModel:
-    obj = session.execute(select(ObjectModel).where(ObjectModel.name == name)).scalar_one_or_none()
-    if obj is None:
-        raise ApiError(404, "not-found", f"no object named {name!r}")
-    return obj
-
-
 def object_out(session: Session, name: str) -> dict[str, Any]:
-    obj = _object(session, name)
-    versions = (
-        session.execute(select(ObjectVersion).where(ObjectVersion.object_id == obj.id).order_by(ObjectVersion.version))
-        .scalars()
-        .all()
-    )
+    obj = get_named(session, OBJECTS, name)
+    versions = versions_of(session, OBJECTS, obj)
     return {
         "name": obj.name,
         "latest_version": versions[-1].version if versions else 0,
@@ -232,37 +194,8 @@ def get_object(session: Session, name: str) -> dict[str, Any]:
 
 
 def get_version(session: Session, name: str, version: int) -> ObjectVersion:
-    obj = _object(session, name)
-    v = session.execute(
-        select(ObjectVersion).where(ObjectVersion.object_id == obj.id, ObjectVersion.version == version)
-    ).scalar_one_or_none()
-    if v is None:
-        raise ApiError(404, "not-found", f"object {name!r} has no version {version}")
-    return v
+    return versioned.get_version(session, OBJECTS, name, version)
 
 
 def list_objects(session: Session, *, cursor: str | None, limit: int) -> dict[str, Any]:
-    key = decode_cursor(cursor, (str,))
-    latest = (
-        select(ObjectVersion.object_id, func.max(ObjectVersion.version).label("latest"))
-        .group_by(ObjectVersion.object_id)
-        .subquery()
-    )
-    q = select(ObjectModel, latest.c.latest).join(latest, latest.c.object_id == ObjectModel.id)
-    if key:
-        q = q.where(ObjectModel.name > key[0])
-    rows, nxt = fetch_page(session, q.order_by(ObjectModel.name), limit, lambda r: [r[0].name])
-    items = [
-        {
-            "name": o.name,
-            "latest_version": latest_v,
-            "updated_at": o.updated_at,
-            "links": {"self": f"/v1/objects/{o.name}"},
-        }
-        for o, latest_v in rows
-    ]
-    return {
-        "items": items,
-        "next_cursor": nxt,
-        "links": {"next": next_link("/v1/objects", nxt, limit)},
-    }
+    return list_page(session, OBJECTS, cursor=cursor, limit=limit)
