@@ -113,6 +113,9 @@ class SimConstants:
     #: contact softness (MuJoCo solref time constant, s, and damping ratio): twice the time step, the stiffest MuJoCo
     #: keeps stable; softer contacts let gram-scale parts (a 1 g pin under 20 N) spin out between the pads
     solref: tuple[float, float] = (0.002, 1.0)
+    #: MuJoCo's no-slip post-processing iterations (0: off): the soft contact model lets a part creep slowly under
+    #: any sustained tangential load inside the friction cone, which static friction does not
+    noslip_iterations: int = 20
     #: approach: step of the sweep (m) and the penetration forgiven (m): the decomposition is a little larger
     #: than the part, and the candidates' own collision check has already been exact on the sampled surface
     approach_step: float = 1.0e-3
@@ -406,7 +409,8 @@ def _xml(
     return f"""
 <mujoco model="graspgen-validation">
   <compiler angle="radian" autolimits="true" boundmass="1e-9" boundinertia="1e-15"/>
-  <option timestep="{c.timestep:.9g}" gravity="0 0 0" integrator="implicitfast" cone="elliptic" impratio="10"/>
+  <option timestep="{c.timestep:.9g}" gravity="0 0 0" integrator="implicitfast" cone="elliptic" impratio="10"
+          noslip_iterations="{c.noslip_iterations:d}"/>
   <asset>
 {assets}
   </asset>

@@ -409,3 +409,26 @@ def test_generate_refuses_validation_without_mass_or_grip_force():
     forceless = {k: v for k, v in GRIPPER.items() if k != "grip_force"}
     with pytest.raises(graspgen.InvalidParameterError, match="grip_force"):
         graspgen.generate(box, forceless, units="m", points=300, k1=2, k2=1, validate=True, mass_kg=0.2)
+
+
+def test_a_held_wedge_does_not_creep():
+    """A prism whose gripped faces are tilted 10 degrees (the grip force squeezes it along them), held 8 mm from its
+    centre of mass: static friction holds it still under every perturbation. MuJoCo's soft contacts alone let it
+    creep at a steady rate (tless_13 grasps turned 10-13 degrees that way); the no-slip iterations stop that and
+    nothing else (the tests above of parts that must slip or turn still pass with them)."""
+    import dataclasses
+    import math
+
+    t = math.tan(math.radians(10.0))
+    corners = [(s * (0.015 + y * t), y, z) for y in (-0.03, 0.03) for s in (-1.0, 1.0) for z in (-0.01, 0.01)]
+    wedge = trimesh.convex.convex_hull(np.array(corners))
+    pose, width = _pose([0.0, 0.008, 0.0], [1, 0, 0])[None], [0.03 + 2 * 0.008 * t]
+    members = [physics.NOMINAL, *physics.perturbation_set(0)]
+    held = physics.simulate_perturbed(physics.prepare_part(wedge, SPEC, mass_kg=0.2), pose, width, members)[0]
+    assert all(r.success for r in held)
+    soft = dataclasses.replace(physics.SIM, noslip_iterations=0)
+    creeping = physics.simulate_perturbed(
+        physics.prepare_part(wedge, SPEC, mass_kg=0.2, constants=soft), pose, width, members
+    )[0]
+    still, crept = max(r.rotation_deg for r in held), max(r.rotation_deg for r in creeping)
+    assert still < 0.25 and crept > still + 0.5, (still, crept)
