@@ -124,6 +124,7 @@ def hold_margins_of(part, gs, idx: np.ndarray, spec: GripperSpec, args) -> np.nd
         contacts,
         radii,
         com,
+        normals=c.normals[idx],
         load=hold.hold_load(args.mass, 9.81),
         grip_force=args.grip_force,
         friction=spec.friction,

@@ -13,10 +13,14 @@ contacts, and for two point-like contacts on one axis the split is fixed by stat
   (t0 + t1 balances the force, h (t1 - t0) the moments);
 - the moment about x can only be resisted by the pads' torsional friction m0 + m1, split freely.
 
-Each contact is a soft finger with an elliptic limit surface, (|t| / (mu F))^2 + (m / (mu F rho))^2 <= 1, where rho
-is the contact's torsion radius: the mean distance, from the contact, of the patch that the pad touches (a flat
-face gives a patch as large as the pad, a curved surface or an edge nearly a point). The load at scale s is held
-when s |t_i| <= mu F for both contacts and sum_i rho_i mu F sqrt(1 - (s |t_i| / (mu F))^2) >= s |moment about x|.
+Each contact is a soft finger with an elliptic limit surface, (|t| / (k mu F))^2 + (m / (k mu F rho))^2 <= 1, where
+rho is the contact's torsion radius: the mean distance, from the contact, of the patch that the pad touches (a flat
+face gives a patch as large as the pad, a curved surface or an edge nearly a point), and k = tan(phi - theta) /
+tan(phi) (tilt_factors) is what is left of the friction cone (half-angle phi = atan(mu)) when the surface normal is
+tilted by theta from the closing axis: the finger's push already leans theta inside the cone (a wedge is squeezed
+along its faces), so a load leaning further has tan(phi - theta) F left in the worst direction. The load at scale s
+is held when s |t_i| <= k_i mu F for both contacts and sum_i rho_i k_i mu F sqrt(1 - (s |t_i| / (k_i mu F))^2) >=
+s |moment about x|.
 The hold margin is the largest s that holds in every direction d (the ratio of the load the grasp resists to the
 load required); criterion (e) keeps margins >= 1. Directions: `HOLD.directions` on a half sphere (d and -d need the
 same), refined twice around the worst; the margin is exact for the directions tried and the continuous minimum
@@ -141,6 +145,22 @@ def _radii_kernel(P, N, cells, cell_start, dims, R, depth, cos_min, rho_min, out
         out[i] = max(total / max(count, 1), rho_min)
 
 
+def tilt_factors(contacts: np.ndarray, normals: np.ndarray, friction: float) -> np.ndarray:
+    """(n, 2) factors in [0, 1] on each contact's friction capacity (tangential and torsional) for a surface normal
+    tilted by theta from the closing axis: the finger pushes along the axis, so the contact force already leans
+    theta inside the friction cone (half-angle phi = atan(mu)) before any load, and a load leaning further has
+    tan(phi - theta) F left instead of tan(phi) F (the worst direction, taken for every direction). 0 at or beyond
+    the cone's edge (that contact holds no load); 1 for a normal along the axis."""
+    c = np.asarray(contacts, dtype=np.float64).reshape(-1, 2, 3)
+    n = np.asarray(normals, dtype=np.float64).reshape(-1, 2, 3)
+    axis = c[:, 1] - c[:, 0]
+    axis = axis / np.maximum(np.linalg.norm(axis, axis=1), 1e-300)[:, None]
+    cos = np.abs(np.einsum("nkd,nd->nk", n, axis)) / np.maximum(np.linalg.norm(n, axis=2), 1e-300)
+    theta = np.arccos(np.clip(cos, 0.0, 1.0))
+    phi = math.atan(float(friction))
+    return np.clip(np.tan(np.maximum(phi - theta, 0.0)) / math.tan(phi), 0.0, 1.0)
+
+
 def _half_sphere(count: int) -> np.ndarray:
     """`count` unit vectors spread evenly over the half sphere x >= 0 (a Fibonacci lattice), (count, 3)."""
     k = np.arange(count, dtype=np.float64) + 0.5
@@ -158,17 +178,27 @@ def hold_margins(
     load: float,
     grip_force: float,
     friction: float,
+    normals: np.ndarray | None = None,
     model: HoldModel = HOLD,
     floor: float = 0.0,
 ) -> np.ndarray:
     """Hold margin (n,) float64 of candidates with `contacts` (n, 2, 3) metres and torsion radii `radii` (n, 2)
     metres, for a load of `load` N (hold_load) at `center_of_mass` (3,), `grip_force` N per finger and Coulomb
-    `friction`. >= 1: the grasp holds (criterion (e)). With `floor` > 0, a candidate stops as soon as its margin is
-    known to be below `floor` and reports an upper bound of it (below `floor`): criterion (e) needs no more."""
+    `friction`. >= 1: the grasp holds (criterion (e)). `normals` (n, 2, 3): the contacts' surface normals; a contact
+    whose normal is tilted from the closing axis spends friction on the grip force itself (tilt_factors); None:
+    both on the axis. With `floor` > 0, a candidate stops as soon as its margin is known to be below `floor` and
+    reports an upper bound of it (below `floor`): criterion (e) needs no more."""
     contacts = np.ascontiguousarray(contacts, dtype=np.float64).reshape(-1, 2, 3)
     radii = np.ascontiguousarray(radii, dtype=np.float64).reshape(-1, 2)
     if len(radii) != len(contacts):
         raise ValueError("radii must be (n, 2) for n candidates")
+    if normals is None:
+        tilt = np.ones((len(contacts), 2), dtype=np.float64)
+    else:
+        normals = np.asarray(normals, dtype=np.float64).reshape(-1, 2, 3)
+        if len(normals) != len(contacts):
+            raise ValueError("normals must be (n, 2, 3) for n candidates")
+        tilt = tilt_factors(contacts, normals, friction)
     com = np.ascontiguousarray(center_of_mass, dtype=np.float64).reshape(3)
     out = np.empty(len(contacts), dtype=np.float64)
     if len(contacts) == 0:
@@ -176,6 +206,7 @@ def hold_margins(
     _margins_kernel(
         contacts,
         radii,
+        tilt,
         com,
         float(load),
         float(friction) * float(grip_force),
@@ -199,17 +230,17 @@ def _slack(s, a0, a1, b, c0, c1):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _coeffs(dx, dy, dz, rx, ry, rz, inv_h, w_cap, W):
+def _coeffs(dx, dy, dz, rx, ry, rz, inv_h, w_cap0, w_cap1, W):
     """In direction d (local frame, x = closing axis), per unit load scale: a0, a1 = each contact's tangential
-    load over its friction capacity mu F, b = the moment about x (N m)."""
+    load over its friction capacity (w_cap_i = W over contact i's capacity), b = the moment about x (N m)."""
     mx = ry * dz - rz * dy
     my = rz * dx - rx * dz
     mz = rx * dy - ry * dx
     # h (t1 - t0) balances the moments about y and z, t0 + t1 the force along y and z
     ddy = -mz * inv_h
     ddz = my * inv_h
-    a0 = 0.5 * w_cap * np.sqrt((dy + ddy) ** 2 + (dz + ddz) ** 2)
-    a1 = 0.5 * w_cap * np.sqrt((dy - ddy) ** 2 + (dz - ddz) ** 2)
+    a0 = 0.5 * w_cap0 * np.sqrt((dy + ddy) ** 2 + (dz + ddz) ** 2)
+    a1 = 0.5 * w_cap1 * np.sqrt((dy - ddy) ** 2 + (dz - ddz) ** 2)
     return a0, a1, W * abs(mx)
 
 
@@ -260,7 +291,7 @@ def _limit(best, a0, a1, b, c0, c1, inv_c, steps):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _margins_kernel(C, rho, com, W, cap, dirs, steps, max_margin, floor, out):
+def _margins_kernel(C, rho, tilt, com, W, cap, dirs, steps, max_margin, floor, out):
     K = dirs.shape[0]
     # refinement: around the worst direction, 8 neighbours at 1/2, 1/4 and 1/8 of the lattice spacing
     spacing = np.sqrt(2.0 * np.pi / K)
@@ -273,13 +304,16 @@ def _margins_kernel(C, rho, com, W, cap, dirs, steps, max_margin, floor, out):
         co = np.empty((K, 3))
         for n in range(ch * _CHUNK, min(N, (ch + 1) * _CHUNK)):
             out[n] = _margin_one(
-                C, rho, com, W, cap, dirs, steps, max_margin, floor, n, co, spacing, ring_c, ring_s, w_cap
+                C, rho, tilt, com, W, cap, dirs, steps, max_margin, floor, n, co, spacing, ring_c, ring_s, w_cap
             )
 
 
 @njit(cache=True, error_model="numpy")
-def _margin_one(C, rho, com, W, cap, dirs, steps, max_margin, floor, n, co, spacing, ring_c, ring_s, w_cap):
+def _margin_one(C, rho, tilt, com, W, cap, dirs, steps, max_margin, floor, n, co, spacing, ring_c, ring_s, w_cap):
     K = dirs.shape[0]
+    k0, k1 = tilt[n, 0], tilt[n, 1]
+    if k0 <= 0.0 or k1 <= 0.0:  # a contact on the cone's edge has no friction left for any load
+        return 0.0
     if True:
         ax = C[n, 1, 0] - C[n, 0, 0]
         ay = C[n, 1, 1] - C[n, 0, 1]
@@ -307,14 +341,17 @@ def _margin_one(C, rho, com, W, cap, dirs, steps, max_margin, floor, n, co, spac
         ry = qx * e1x + qy * e1y + qz * e1z
         rz = qx * e2x + qy * e2y + qz * e2z
         inv_h = 2.0 / w
-        c0 = cap * rho[n, 0]
-        c1 = cap * rho[n, 1]
+        c0 = cap * k0 * rho[n, 0]
+        c1 = cap * k1 * rho[n, 1]
+        # the tangential loads over each contact's own capacity mu F k: a0 and a1 of _coeffs divided by k
+        w_cap0 = w_cap / k0
+        w_cap1 = w_cap / k1
         inv_c = 1.0 / (c0 + c1)
         # the direction with the lowest lower bound first: most other directions then end at their bound
         first = 0
         low = np.inf
         for k in range(K):
-            a0, a1, b = _coeffs(dirs[k, 0], dirs[k, 1], dirs[k, 2], rx, ry, rz, inv_h, w_cap, W)
+            a0, a1, b = _coeffs(dirs[k, 0], dirs[k, 1], dirs[k, 2], rx, ry, rz, inv_h, w_cap0, w_cap1, W)
             co[k, 0], co[k, 1], co[k, 2] = a0, a1, b
             lb = _lower(a0, a1, b, c0, c1, inv_c)
             if lb < low:
@@ -353,7 +390,7 @@ def _margin_one(C, rho, com, W, cap, dirs, steps, max_margin, floor, n, co, spac
                 vy = by + ca * py + sa * qy2
                 vz = bz + ca * pz + sa * qz2
                 lv = np.sqrt(vx * vx + vy * vy + vz * vz)
-                a0, a1, b = _coeffs(vx / lv, vy / lv, vz / lv, rx, ry, rz, inv_h, w_cap, W)
+                a0, a1, b = _coeffs(vx / lv, vy / lv, vz / lv, rx, ry, rz, inv_h, w_cap0, w_cap1, W)
                 s = _limit(best, a0, a1, b, c0, c1, inv_c, steps)
                 if s < best:
                     best = s

@@ -95,6 +95,30 @@ def test_margin_scales_with_grip_force_over_load():
     assert c == pytest.approx(a, rel=1e-6)
 
 
+def test_a_tilted_contact_leaves_less_friction_for_the_load():
+    """Centre of mass at the midpoint: only the tangential load counts, W / 2 per contact against k mu F each, so
+    the margin is 2 k mu F / W with k = tan(atan(mu) - theta) / mu; the grip force itself leans theta inside the
+    cone (a wedge squeezed along its faces). Normals along the axis give k = 1; at the cone's edge nothing is left."""
+    contacts = np.array([[[-0.01, 0.0, 0.0], [0.01, 0.0, 0.0]]])
+    radii = np.array([[0.004, 0.004]])
+    load = 4.0
+
+    def margin(theta_deg):
+        t = np.radians(theta_deg)
+        normals = np.array([[[-np.cos(t), np.sin(t), 0.0], [np.cos(t), 0.0, np.sin(t)]]])
+        kw = dict(load=load, grip_force=F, friction=MU, normals=normals)
+        return hold.hold_margins(contacts, radii, np.zeros(3), **kw)[0]
+
+    plain = hold.hold_margins(contacts, radii, np.zeros(3), load=load, grip_force=F, friction=MU)[0]
+    assert plain == pytest.approx(2 * MU * F / load, rel=1e-3)
+    assert margin(0.0) == pytest.approx(plain, rel=1e-9)
+    k = np.tan(np.arctan(MU) - np.radians(10.0)) / MU
+    assert margin(10.0) == pytest.approx(2 * k * MU * F / load, rel=1e-3)
+    assert margin(np.degrees(np.arctan(MU)) + 1.0) == 0.0
+    factors = hold.tilt_factors(contacts, -np.array([[[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]]]), MU)  # sign-blind
+    np.testing.assert_allclose(factors, 1.0)
+
+
 def test_floor_stops_early_below_it_and_changes_nothing_above():
     rng = np.random.default_rng(5)
     n = 400
