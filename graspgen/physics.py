@@ -120,6 +120,9 @@ class SimConstants:
     #: than the part, and the candidates' own collision check has already been exact on the sampled surface
     approach_step: float = 1.0e-3
     approach_tolerance: float = 1.0e-3
+    #: samples of the part's surface that confirm an approach collision with a convex piece (about 0.2 mm apart on
+    #: a 100 cm^2 part)
+    surface_samples: int = 200_000
     #: outcome thresholds: contact midpoint displacement (m), rotation (deg), displacement that means dropped (m)
     slip_limit: float = 5.0e-3
     rotation_limit_deg: float = 10.0
@@ -275,6 +278,9 @@ class SimPart:
     inertia: np.ndarray | None = None  # (3, 3) about the centre of mass, kg m^2
     #: the convex pieces, kept to build the models of perturbations (another mass or friction)
     hulls: list = field(default_factory=list, repr=False)
+    #: dense samples (object frame) of the part's own surface when the pieces are larger than the part (CoACD, in
+    #: its concavities): an approach that meets a piece collides only if the gripper's path meets this surface
+    surface_points: np.ndarray | None = field(default=None, repr=False)
     _variants: dict = field(default_factory=dict, repr=False, compare=False)
     _lock: Any = field(default_factory=threading.Lock, repr=False, compare=False)
 
@@ -348,6 +354,12 @@ def _decompose(mesh: trimesh.Trimesh, c: SimConstants, seed: int) -> tuple[list[
     if not pieces:
         return [mesh.convex_hull], "convex-hull", "convex decomposition gave no pieces: simulated as the convex hull"
     return pieces, "coacd", None
+
+
+def _surface_points(mesh: trimesh.Trimesh, c: SimConstants, seed: int) -> np.ndarray:
+    """`c.surface_samples` seeded points of the part's own surface (object frame)."""
+    pts, _ = trimesh.sample.sample_surface(mesh, int(c.surface_samples), seed=int(seed))
+    return np.ascontiguousarray(pts, dtype=np.float64)
 
 
 def _mass_properties(
@@ -502,6 +514,7 @@ def prepare_part(
         grip_force=float(force),
         inertia=inertia,
         hulls=pieces,
+        surface_points=_surface_points(mesh, constants, seed) if geometry == "coacd" else None,
     )
 
 
@@ -607,6 +620,30 @@ class _Grasp:
             mj.mj_kinematics(self.m, d)
             mj.mj_collision(self.m, d)
             if self._contacts()[2] > self.c.approach_tolerance:
+                return self._path_meets_the_part()
+        return False
+
+    def _path_meets_the_part(self) -> bool:
+        """Does the gripper's way in meet the part's own surface (not only a convex piece)? The approach is a
+        translation along +Z, so each of the palm's and the open fingers' boxes sweeps a box, from where it starts
+        to the grasp; a surface sample inside one (shrunk by the approach tolerance) is a collision. Without
+        surface samples (a convex part, or the hull as the fallback) the pieces are the part."""
+        pts = self.sim.surface_points
+        if pts is None:
+            return True
+        mj, m, d = self.mj, self.m, self.d
+        self._set_part(self.p0)
+        mj.mj_kinematics(m, d)
+        p, R = self._part_pose()
+        q = pts @ R.T + p  # the part at the grasp, in the gripper's frame
+        tol = self.c.approach_tolerance
+        for g in range(m.ngeom):
+            if m.geom_bodyid[g] == self.part_body or m.geom_type[g] != mj.mjtGeom.mjGEOM_BOX:
+                continue
+            lo = d.geom_xpos[g] - m.geom_size[g] + tol
+            hi = d.geom_xpos[g] + m.geom_size[g] - tol
+            lo = lo - np.array([0.0, 0.0, self.approach_distance])  # where the box starts, below the grasp
+            if np.any(np.all((q > lo) & (q < hi), axis=1)):
                 return True
         return False
 

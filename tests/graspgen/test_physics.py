@@ -432,3 +432,30 @@ def test_a_held_wedge_does_not_creep():
     )[0]
     still, crept = max(r.rotation_deg for r in held), max(r.rotation_deg for r in creeping)
     assert still < 0.25 and crept > still + 0.5, (still, crept)
+
+
+def test_an_approach_into_a_convex_piece_but_not_into_the_part_is_no_collision(monkeypatch):
+    """The convex pieces are larger than the part in its concavities. An upside-down U channel simulated as one
+    piece (its hull, a full box): gripping one wall puts the inner finger into the channel's gap, inside the piece
+    but clear of the part, so the approach is free; a third wall in that gap makes it a collision."""
+    from graspgen.transforms import grasp_frames
+
+    def channel(*walls):
+        boxes = [trimesh.creation.box(extents=(0.06, 0.03, 0.01), transform=_at(0.0, 0.035))]
+        boxes += [trimesh.creation.box(extents=(0.01, 0.03, 0.04), transform=_at(x, 0.01)) for x in walls]
+        return trimesh.util.concatenate(boxes)
+
+    def _at(x, z):
+        T = np.eye(4)
+        T[:3, 3] = (x, 0.0, z)
+        return T
+
+    monkeypatch.setattr(physics, "_decompose", lambda mesh, c, seed: ([mesh.convex_hull], "coacd", None))
+    rolls = 2 * np.pi * np.arange(16) / 16
+    frames = grasp_frames(np.tile([[-0.025, 0.0, 0.0]], (16, 1)), np.tile([[1.0, 0.0, 0.0]], (16, 1)), rolls)
+    T = frames[int(np.argmax(frames[:, 2, 2]))]  # the gripper comes from below, into the open side
+    assert T[2, 2] > 0.99
+    free = physics.simulate_grasp(physics.prepare_part(channel(-0.025, 0.025), SPEC, mass_kg=0.1), T, 0.01)
+    assert free.reason != "collision"
+    blocked = physics.simulate_grasp(physics.prepare_part(channel(-0.025, 0.025, -0.006), SPEC, mass_kg=0.1), T, 0.01)
+    assert blocked.reason == "collision"
