@@ -51,7 +51,7 @@ CASES = (
         "thick-ring-best-near-medoid",
         "generate",
         "thick-ring",
-        "--points 1000 --mass 0.8 --friction 0.4 --select best-near-medoid --k1 8 --k2 2",
+        "--points 1000 --mass 0.5 --friction 0.4 --select best-near-medoid --k1 8 --k2 2",
     ),
     Case(
         "flanged-bushing-inside-hold-off",
