@@ -12,7 +12,8 @@ At the pick gravity acts along the grasp frame's +Z: the gripper came down along
 along -Z, the usual top-down pick. Each grasp goes through
 
 1. approach: the open gripper (pre-grasp width) comes in along +Z from clear of the part; any penetration deeper
-   than `approach_tolerance` on the way or at the pose -> `collision`;
+   than `approach_tolerance` on the way or at the pose -> `collision`, confirmed against the part's own surface
+   when the geometry is a decomposition (its pieces are larger than the part in the concavities);
 2. close: both fingers pushed with the grip force (coupled like a real parallel gripper); either finger without a
    contact afterwards -> `no_contact`;
 3. lift: the load ramps up to gravity plus the lift acceleration, then holds;
@@ -23,7 +24,9 @@ along -Z, the usual top-down pick. Each grasp goes through
 
 losing either finger's contact (or the part moving more than `drop_distance`) -> `dropped`; the contact midpoint
 moving more than `slip_limit` or the part turning more than `rotation_limit_deg` relative to the fingers ->
-`slipped`; otherwise a success. Every constant is a field of `SimConstants`.
+`slipped`; otherwise a success. Every constant is a field of `SimConstants`. Friction is MuJoCo's elliptic cone
+with its no-slip iterations: without them the soft contacts let a held part creep at a steady rate under any
+sustained load inside the cone (grasps turned 10-13 degrees in a second), which static friction does not.
 
 Collision geometry of the part: a convex decomposition (CoACD), or the part itself when it is convex; if the
 decomposition is unavailable or fails, the convex hull, and `SimPart.note` says so. The centre of mass and the shape
