@@ -6,12 +6,12 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from pydantic import ConfigDict, Field
-from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from graspgen.params import Params
 from services.api.schemas import ID_MAX, PARAMS_DOC, PARAMS_EXAMPLE, SLUG, BulkItem, NoNulModel
-from services.common.models import Gripper, GripperVersion, ObjectModel, ObjectVersion
+from services.common.models import GripperVersion, ObjectVersion
+from services.common.versions import GRIPPERS, OBJECTS, Versioned, find_version
 
 from .kind import JobKind, RunContext
 from .params import QUALITY_PARAMS, given_kwargs, split_quality
@@ -61,24 +61,15 @@ class GenerateJobRequest(NoNulModel):
 
 
 # -- submission (the API) ---------------------------------------------------------------------------------------------
-def _version(session: Session, what: str, name: str, version: int | None) -> ObjectVersion | GripperVersion:
-    """The object's or gripper's (`what`) given version, or its newest; 422 `unknown-<what>` when there is none."""
+def _version(session: Session, kind: Versioned, name: str, version: int | None) -> ObjectVersion | GripperVersion:
+    """The object's or gripper's given version, or its newest; 422 `unknown-<what>` when there is none."""
     from services.api.problems import ApiError  # the worker imports this module for `run` and never loads the API
 
-    row, parent, link = _VERSIONED[what]
-    q = select(row).join(parent, parent.id == link).where(parent.name == name)
-    q = q.where(row.version == version) if version else q.order_by(row.version.desc()).limit(1)
-    v = session.execute(q).scalars().first()
+    v = find_version(session, kind, name, version)
     if v is None:
-        label = f"{what} {name!r}" + (f" version {version}" if version else "")
-        raise ApiError(422, f"unknown-{what}", f"there is no {label}", field=what)
+        label = f"{kind.what} {name!r}" + (f" version {version}" if version else "")
+        raise ApiError(422, f"unknown-{kind.what}", f"there is no {label}", field=kind.what)
     return v
-
-
-_VERSIONED = {
-    "object": (ObjectVersion, ObjectModel, ObjectVersion.object_id),
-    "gripper": (GripperVersion, Gripper, GripperVersion.gripper_id),
-}
 
 
 def _effective_params(
@@ -95,8 +86,8 @@ def _effective_params(
 
 def resolve(session: Session, body: GenerateJobRequest | BulkItem) -> dict[str, Any]:
     """A `POST /v1/jobs` body or a bulk item (the same fields): the newest versions unless given, and the params."""
-    ov = _version(session, "object", body.object, body.object_version)
-    gv = _version(session, "gripper", body.gripper, body.gripper_version)
+    ov = _version(session, OBJECTS, body.object, body.object_version)
+    gv = _version(session, GRIPPERS, body.gripper, body.gripper_version)
     return {
         "object_version_id": ov.id,
         "gripper_version_id": gv.id,

@@ -10,8 +10,9 @@ from sqlalchemy.orm import Session
 from graspgen.gripper import GripperSpec
 from services.common.jobs import sha256_json
 from services.common.models import Gripper, GripperVersion
+from services.common.versions import GRIPPERS
 
-from .versioned import GRIPPERS, add_version, get_named, get_version, list_page, versions_of
+from .versioned import add_version, get_version, list_page, named_out
 
 __all__ = ["create_gripper", "gripper_out", "get_gripper_version", "list_grippers", "version_out"]
 
@@ -48,17 +49,14 @@ def create_gripper(session: Session, data: Any) -> tuple[dict[str, Any], bool]:
 
 
 def gripper_out(session: Session, name: str) -> dict[str, Any]:
-    g = get_named(session, GRIPPERS, name)
-    versions = versions_of(session, GRIPPERS, g)
-    return {
-        "name": g.name,
-        "latest_version": versions[-1].version if versions else 0,
-        "created_at": g.created_at,
-        "updated_at": g.updated_at,
-        "spec": versions[-1].spec if versions else {},
-        "versions": [version_out(g.name, v) for v in versions],
-        "links": {"self": f"/v1/grippers/{g.name}", "catalogue": f"/v1/catalogue?gripper={g.name}"},
-    }
+    return named_out(
+        session,
+        GRIPPERS,
+        name,
+        version_out,
+        links={"catalogue": f"/v1/catalogue?gripper={name}"},
+        latest=lambda versions: {"spec": versions[-1].spec if versions else {}},
+    )
 
 
 def get_gripper_version(session: Session, name: str, version: int) -> dict[str, Any]:

@@ -19,18 +19,11 @@ from sqlalchemy.orm import Session
 from graspgen.errors import GraspgenError
 from services.common import jobs as J  # noqa: N812 - short name for the shared job helpers
 from services.common.logs import request_id_var
-from services.common.models import (
-    TERMINAL_STATES,
-    Gripper,
-    GripperVersion,
-    Job,
-    ObjectModel,
-    ObjectVersion,
-    utcnow,
-)
+from services.common.models import TERMINAL_STATES, GripperVersion, Job, ObjectVersion, utcnow
 from services.common.settings import Settings
 from services.common.storage import Storage, StorageError
 from services.common.tokens import Principal
+from services.common.versions import GRIPPERS, OBJECTS, name_and_version
 from services.jobkinds import RUNNABLE, JobRequest, is_container
 from services.jobkinds import bulk as bulk_kind
 from services.worker.dispatch import Dispatcher, DispatchError
@@ -254,19 +247,9 @@ def job_out(session: Session, job: Job) -> dict[str, Any]:
     if job.parent_id is not None:
         out["links"]["parent"] = f"/v1/jobs/{job.parent_id}"
     if job.object_version_id is not None:
-        name, version = session.execute(
-            select(ObjectModel.name, ObjectVersion.version)
-            .join(ObjectVersion, ObjectVersion.object_id == ObjectModel.id)
-            .where(ObjectVersion.id == job.object_version_id)
-        ).one()
-        out["object"], out["object_version"] = name, version
+        out["object"], out["object_version"] = name_and_version(session, OBJECTS, job.object_version_id)
     if job.gripper_version_id is not None:
-        name, version = session.execute(
-            select(Gripper.name, GripperVersion.version)
-            .join(GripperVersion, GripperVersion.gripper_id == Gripper.id)
-            .where(GripperVersion.id == job.gripper_version_id)
-        ).one()
-        out["gripper"], out["gripper_version"] = name, version
+        out["gripper"], out["gripper_version"] = name_and_version(session, GRIPPERS, job.gripper_version_id)
     if is_container(job.kind):
         agg = J.aggregate_children(session, job.id)
         children = session.execute(select(Job).where(Job.parent_id == job.id).order_by(Job.item_index)).scalars()

@@ -17,10 +17,11 @@ from graspgen.units import to_metres_scale
 from services.common.models import ObjectModel, ObjectVersion
 from services.common.settings import Settings
 from services.common.storage import Storage
+from services.common.versions import OBJECTS
 
 from ..problems import ApiError
 from . import versioned
-from .versioned import OBJECTS, add_version, get_named, list_page, versions_of
+from .versioned import add_version, list_page, named_out
 
 __all__ = ["check_slug", "upload_object", "get_object", "get_version", "list_objects", "version_out", "object_out"]
 
@@ -177,16 +178,7 @@ def _same(name: str, existing: ObjectVersion, mass_kg: float | None) -> dict[str
 
 
 def object_out(session: Session, name: str) -> dict[str, Any]:
-    obj = get_named(session, OBJECTS, name)
-    versions = versions_of(session, OBJECTS, obj)
-    return {
-        "name": obj.name,
-        "latest_version": versions[-1].version if versions else 0,
-        "created_at": obj.created_at,
-        "updated_at": obj.updated_at,
-        "versions": [version_out(obj.name, v) for v in versions],
-        "links": {"self": f"/v1/objects/{obj.name}", "grasp_sets": f"/v1/grasp-sets?object={obj.name}"},
-    }
+    return named_out(session, OBJECTS, name, version_out, links={"grasp_sets": f"/v1/grasp-sets?object={name}"})
 
 
 def get_object(session: Session, name: str) -> dict[str, Any]:

@@ -1,10 +1,9 @@
-"""Objects and grippers alike: a named thing kept in numbered versions that never change. Finding one and its
-versions, adding the next version, and the keyset-paged list, once for both (crud/objects.py, crud/grippers.py)."""
+"""Objects and grippers alike (services/common/versions.py): finding one and its versions, adding the next version,
+the thing with its versions and the keyset-paged list, once for both (crud/objects.py, crud/grippers.py)."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 from sqlalchemy import func, select
@@ -12,33 +11,16 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from services.common import catalogue
-from services.common.models import Gripper, GripperVersion, ObjectModel, ObjectVersion, utcnow
+from services.common.models import utcnow
+from services.common.versions import Versioned
 
 from ..pagination import decode_cursor, fetch_page, next_link
 from ..problems import ApiError
 
-__all__ = ["Versioned", "OBJECTS", "GRIPPERS", "get_named", "versions_of", "get_version", "add_version", "list_page"]
+__all__ = ["get_named", "versions_of", "get_version", "add_version", "named_out", "list_page"]
 
 #: attempts at adding a version when a concurrent writer took the name or the number
 _ATTEMPTS = 3
-
-
-@dataclass(frozen=True)
-class Versioned:
-    """The table of the named things, the table of their versions (linked by `<what>_id`) and their API path."""
-
-    what: str  # "object" | "gripper": messages, the link column, catalogue.refresh's keyword
-    table: type
-    versions: type
-    path: str
-
-    @property
-    def link(self) -> Any:
-        return getattr(self.versions, f"{self.what}_id")
-
-
-OBJECTS = Versioned("object", ObjectModel, ObjectVersion, "/v1/objects")
-GRIPPERS = Versioned("gripper", Gripper, GripperVersion, "/v1/grippers")
 
 
 def get_named(session: Session, kind: Versioned, name: str) -> Any:
@@ -94,6 +76,30 @@ def add_version(
             if found is not None:
                 return found, False
     raise ApiError(409, "conflict", f"concurrent changes to this {kind.what}; retry")
+
+
+def named_out(
+    session: Session,
+    kind: Versioned,
+    name: str,
+    version_out: Callable[[str, Any], dict[str, Any]],
+    *,
+    links: dict[str, str],
+    latest: Callable[[list[Any]], dict[str, Any]] = lambda versions: {},
+) -> dict[str, Any]:
+    """The thing called `name` with every version (`version_out` of each, oldest first): `latest(versions)` adds fields
+    of the newest version after `updated_at` (a gripper's spec), `links` come after its own."""
+    row = get_named(session, kind, name)
+    versions = versions_of(session, kind, row)
+    return {
+        "name": row.name,
+        "latest_version": versions[-1].version if versions else 0,
+        "created_at": row.created_at,
+        "updated_at": row.updated_at,
+        **latest(versions),
+        "versions": [version_out(row.name, v) for v in versions],
+        "links": {"self": f"{kind.path}/{row.name}", **links},
+    }
 
 
 def list_page(session: Session, kind: Versioned, *, cursor: str | None, limit: int) -> dict[str, Any]:
