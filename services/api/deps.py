@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 from collections.abc import AsyncIterator, Callable
+from dataclasses import dataclass
 from typing import Annotated
 
-from fastapi import Depends, Request
+from fastapi import Depends, Query, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session
 
@@ -26,6 +27,8 @@ __all__ = [
     "PrincipalDep",
     "ReadDep",
     "WriteDep",
+    "Paging",
+    "PagingDep",
     "require",
 ]
 
@@ -99,3 +102,21 @@ PrincipalDep = Annotated[Principal, Depends(get_principal)]
 ReadDep = Annotated[Principal, Depends(require("read"))]
 WriteDep = Annotated[Principal, Depends(require("write"))]
 AdminDep = Annotated[Principal, Depends(require("admin"))]
+
+
+@dataclass(frozen=True)
+class Paging:
+    """The page a list route is asked for: the previous page's cursor and how many items (the settings' default when
+    not given, never more than their maximum)."""
+
+    cursor: str | None
+    limit: int
+
+
+async def get_paging(
+    settings: SettingsDep, cursor: str | None = None, limit: Annotated[int | None, Query(ge=1)] = None
+) -> Paging:
+    return Paging(cursor, min(limit or settings.page_size_default, settings.page_size_max))
+
+
+PagingDep = Annotated[Paging, Depends(get_paging)]

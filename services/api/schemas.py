@@ -60,20 +60,29 @@ class ObjectVersionOut(BaseModel):
     links: dict[str, str]
 
 
-class ObjectOut(BaseModel):
+class _Named(BaseModel):
+    # objects and grippers alike (crud/versioned.named_out); each subclass adds its versions and links
     name: str
     latest_version: int
     created_at: datetime
     updated_at: datetime
+
+
+class ObjectOut(_Named):
     versions: list[ObjectVersionOut]
     links: dict[str, str]
 
 
-class ObjectSummary(BaseModel):
+class _NamedSummary(BaseModel):
+    # an object or gripper in a list (crud/versioned.list_page)
     name: str
     latest_version: int
     updated_at: datetime
     links: dict[str, str]
+
+
+class ObjectSummary(_NamedSummary):
+    pass
 
 
 class Page(BaseModel):
@@ -109,21 +118,14 @@ class GripperVersionOut(BaseModel):
     links: dict[str, str]
 
 
-class GripperOut(BaseModel):
-    name: str
-    latest_version: int
-    created_at: datetime
-    updated_at: datetime
+class GripperOut(_Named):
     spec: Annotated[dict[str, Any], _SPEC_DOC] = Field(description="the latest version's spec")
     versions: list[GripperVersionOut]
     links: dict[str, str]
 
 
-class GripperSummary(BaseModel):
-    name: str
-    latest_version: int
-    updated_at: datetime
-    links: dict[str, str]
+class GripperSummary(_NamedSummary):
+    pass
 
 
 class GripperPage(Page):

@@ -7,7 +7,7 @@ from fastapi import APIRouter, Path, Query, Request, Response
 
 from ...common.storage import Storage
 from ..crud import grasp_sets as crud
-from ..deps import ReadDep, ReadSessionDep, SessionDep, SettingsDep, StorageDep, WriteDep
+from ..deps import PagingDep, ReadDep, ReadSessionDep, SessionDep, StorageDep, WriteDep
 from ..http import IMMUTABLE, REVALIDATE, BlobCache, blob_response, etag_matches, not_modified
 from ..problems import ApiError
 from ..schemas import ID_MAX, SLUG, CatalogueChange, CatalogueHistoryPage, CataloguePage, GraspPage, GraspSetPage
@@ -58,18 +58,16 @@ def export_response(request: Request, ref: crud.ExportRef, *, cache_control: str
 def list_grasp_sets(
     principal: ReadDep,
     session: ReadSessionDep,
-    settings: SettingsDep,
+    page: PagingDep,
     object: Annotated[str | None, Query(pattern=SLUG)] = None,
     gripper: Annotated[str | None, Query(pattern=SLUG)] = None,
-    cursor: str | None = None,
-    limit: Annotated[int | None, Query(ge=1)] = None,
 ) -> dict:
     return crud.list_grasp_sets(
         session,
         object=object,
         gripper=gripper,
-        cursor=cursor,
-        limit=min(limit or settings.page_size_default, settings.page_size_max),
+        cursor=page.cursor,
+        limit=page.limit,
     )
 
 
@@ -129,12 +127,10 @@ def list_grasps(
     grasp_set_id: GraspSetId,
     principal: ReadDep,
     session: ReadSessionDep,
-    settings: SettingsDep,
+    page: PagingDep,
     min_width: Annotated[float | None, Query(ge=0, description="metres")] = None,
     max_width: Annotated[float | None, Query(ge=0, description="metres")] = None,
     min_friction_margin_deg: float | None = None,
-    cursor: str | None = None,
-    limit: Annotated[int | None, Query(ge=1)] = None,
 ) -> dict:
     return crud.list_grasps(
         session,
@@ -142,8 +138,8 @@ def list_grasps(
         min_width=min_width,
         max_width=max_width,
         min_friction_margin_deg=min_friction_margin_deg,
-        cursor=cursor,
-        limit=min(limit or settings.page_size_default, settings.page_size_max),
+        cursor=page.cursor,
+        limit=page.limit,
     )
 
 
@@ -165,14 +161,12 @@ def list_catalogue(
     request: Request,
     principal: ReadDep,
     session: ReadSessionDep,
-    settings: SettingsDep,
+    page: PagingDep,
     gripper: Annotated[str, Query(pattern=SLUG, examples=["pgn-80"])],
     since: Annotated[
         int | None, Query(ge=0, le=2**62, description="change number: `next_since` of the previous sync")
     ] = None,
     updated_since: Annotated[datetime | None, Query(description="ISO 8601; naive times are UTC")] = None,
-    cursor: str | None = None,
-    limit: Annotated[int | None, Query(ge=1)] = None,
 ) -> Any:
     if updated_since is not None and updated_since.tzinfo is None:
         from datetime import UTC
@@ -183,8 +177,8 @@ def list_catalogue(
         gripper=gripper,
         since=since,
         updated_since=updated_since,
-        cursor=cursor,
-        limit=min(limit or settings.page_size_default, settings.page_size_max),
+        cursor=page.cursor,
+        limit=page.limit,
     )
     if etag_matches(request, etag):
         return not_modified(etag, REVALIDATE)
@@ -245,13 +239,9 @@ def get_catalogue_history(
     gripper: Annotated[str, Path(pattern=SLUG)],
     principal: ReadDep,
     session: ReadSessionDep,
-    settings: SettingsDep,
-    cursor: str | None = None,
-    limit: Annotated[int | None, Query(ge=1)] = None,
+    page: PagingDep,
 ) -> dict:
-    return crud.catalogue_history(
-        session, object, gripper, cursor=cursor, limit=min(limit or settings.page_size_default, settings.page_size_max)
-    )
+    return crud.catalogue_history(session, object, gripper, cursor=page.cursor, limit=page.limit)
 
 
 @router.post(

@@ -2,11 +2,11 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body, Path, Query, Response
+from fastapi import APIRouter, Body, Path, Response
 from pydantic import WithJsonSchema
 
 from ..crud import grippers as crud
-from ..deps import ReadDep, ReadSessionDep, SessionDep, SettingsDep, WriteDep
+from ..deps import PagingDep, ReadDep, ReadSessionDep, SessionDep, WriteDep
 from ..schemas import GRIPPER_SPEC_EXAMPLE, ID_MAX, SLUG, GripperOut, GripperPage, GripperVersionOut
 from . import problems
 
@@ -48,13 +48,9 @@ def create_gripper(
 def list_grippers(
     principal: ReadDep,
     session: ReadSessionDep,
-    settings: SettingsDep,
-    cursor: str | None = None,
-    limit: Annotated[int | None, Query(ge=1)] = None,
+    page: PagingDep,
 ) -> dict:
-    return crud.list_grippers(
-        session, cursor=cursor, limit=min(limit or settings.page_size_default, settings.page_size_max)
-    )
+    return crud.list_grippers(session, cursor=page.cursor, limit=page.limit)
 
 
 @router.get(

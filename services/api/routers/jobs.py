@@ -9,7 +9,7 @@ from services.common.models import JOB_STATES, TERMINAL_STATES
 from services.jobkinds import DEFAULT_KIND, KINDS, RUNNABLE, JobRequest
 
 from ..crud import jobs as crud
-from ..deps import DispatcherDep, ReadDep, ReadSessionDep, SessionDep, SettingsDep, StorageDep, WriteDep
+from ..deps import DispatcherDep, PagingDep, ReadDep, ReadSessionDep, SessionDep, SettingsDep, StorageDep, WriteDep
 from ..schemas import BulkRequest, JobOut, JobPage
 from . import problems
 
@@ -98,19 +98,17 @@ def submit_bulk(
 def list_jobs(
     principal: ReadDep,
     session: ReadSessionDep,
-    settings: SettingsDep,
+    page: PagingDep,
     state: Annotated[str | None, Query(pattern="^(" + "|".join(JOB_STATES) + ")$")] = None,
     kind: Annotated[str | None, Query(pattern="^(" + "|".join(KINDS) + ")$")] = None,
-    cursor: str | None = None,
-    limit: Annotated[int | None, Query(ge=1)] = None,
 ) -> dict:
     return crud.list_jobs(
         session,
         principal,
         state=state,
         kind=kind,
-        cursor=cursor,
-        limit=min(limit or settings.page_size_default, settings.page_size_max),
+        cursor=page.cursor,
+        limit=page.limit,
     )
 
 

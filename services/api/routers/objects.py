@@ -2,10 +2,10 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, Path, Query, Request, Response, UploadFile
+from fastapi import APIRouter, File, Form, Path, Request, Response, UploadFile
 
 from ..crud import objects as crud
-from ..deps import ReadDep, ReadSessionDep, SessionDep, SettingsDep, StorageDep, WriteDep
+from ..deps import PagingDep, ReadDep, ReadSessionDep, SessionDep, SettingsDep, StorageDep, WriteDep
 from ..http import IMMUTABLE, blob_response
 from ..schemas import ID_MAX, SLUG, ObjectOut, ObjectPage, ObjectVersionOut
 from . import problems
@@ -67,13 +67,9 @@ def upload_object(
 def list_objects(
     principal: ReadDep,
     session: ReadSessionDep,
-    settings: SettingsDep,
-    cursor: str | None = None,
-    limit: Annotated[int | None, Query(ge=1)] = None,
+    page: PagingDep,
 ) -> dict:
-    return crud.list_objects(
-        session, cursor=cursor, limit=min(limit or settings.page_size_default, settings.page_size_max)
-    )
+    return crud.list_objects(session, cursor=page.cursor, limit=page.limit)
 
 
 @router.get("/{name}", response_model=ObjectOut, summary="An object and all its versions", responses=problems(404))
