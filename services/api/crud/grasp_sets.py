@@ -42,6 +42,7 @@ __all__ = [
     "etag_of",
     "ExportRef",
     "export_ref",
+    "grasp_set_row",
     "PreviewRef",
     "preview_ref",
     "dumps",
@@ -80,7 +81,7 @@ def etag_of(sha256: str) -> str:
 
 def summary_select() -> Select:
     # columns, not entities: no ORM identity map and no stats JSON to decode for a list
-    return (
+    return _with_names(
         select(
             GraspSet.id,
             GraspSet.version,
@@ -96,7 +97,13 @@ def summary_select() -> Select:
             Gripper.name.label("gripper"),
             GripperVersion.version.label("gripper_version"),
         )
-        .join(ObjectModel, ObjectModel.id == GraspSet.object_id)
+    )
+
+
+def _with_names(q: Select) -> Select:
+    """`q` over grasp sets joined to their object and gripper and the versions they were made for."""
+    return (
+        q.join(ObjectModel, ObjectModel.id == GraspSet.object_id)
         .join(ObjectVersion, ObjectVersion.id == GraspSet.object_version_id)
         .join(Gripper, Gripper.id == GraspSet.gripper_id)
         .join(GripperVersion, GripperVersion.id == GraspSet.gripper_version_id)
@@ -173,15 +180,17 @@ def get_grasp_set(session: Session, grasp_set_id: int) -> GraspSet:
     return gs
 
 
-def export_ref(session: Session, grasp_set_id: int) -> ExportRef:
-    row = session.execute(
-        select(GraspSet.id, GraspSet.version, GraspSet.export_key, GraspSet.export_sha256).where(
-            GraspSet.id == grasp_set_id
-        )
-    ).first()
+def grasp_set_row(session: Session, grasp_set_id: int, q: Select) -> Any:
+    """The row of `q` (columns of grasp sets and what it joins) for the grasp set `grasp_set_id`; 404 without it."""
+    row = session.execute(q.where(GraspSet.id == grasp_set_id)).first()
     if row is None:
         raise ApiError(404, "not-found", f"no grasp set {grasp_set_id}")
-    return ExportRef(*row)
+    return row
+
+
+def export_ref(session: Session, grasp_set_id: int) -> ExportRef:
+    q = select(GraspSet.id, GraspSet.version, GraspSet.export_key, GraspSet.export_sha256)
+    return ExportRef(*grasp_set_row(session, grasp_set_id, q))
 
 
 @dataclass(frozen=True)
@@ -196,14 +205,10 @@ class PreviewRef:
 
 
 def preview_ref(session: Session, grasp_set_id: int) -> PreviewRef:
-    row = session.execute(
-        select(GraspSet.id, GraspSet.export_key, ObjectVersion.file_key, ObjectVersion.units, ObjectVersion.format)
-        .join(ObjectVersion, ObjectVersion.id == GraspSet.object_version_id)
-        .where(GraspSet.id == grasp_set_id)
-    ).first()
-    if row is None:
-        raise ApiError(404, "not-found", f"no grasp set {grasp_set_id}")
-    return PreviewRef(*row)
+    q = select(
+        GraspSet.id, GraspSet.export_key, ObjectVersion.file_key, ObjectVersion.units, ObjectVersion.format
+    ).join(ObjectVersion, ObjectVersion.id == GraspSet.object_version_id)
+    return PreviewRef(*grasp_set_row(session, grasp_set_id, q))
 
 
 def catalogue_entry(session: Session, object: str, gripper: str, version: int | None) -> ExportRef:
@@ -235,22 +240,19 @@ def catalogue_entry(session: Session, object: str, gripper: str, version: int | 
             )
         return ExportRef(row.id, row.version, row.export_key, row.export_sha256, bool(row.released), bool(row.stale))
     row = session.execute(
-        select(
-            GraspSet.id,
-            GraspSet.version,
-            GraspSet.export_key,
-            GraspSet.export_sha256,
-            GraspSet.withdrawn_at,
-            GraspSet.object_id,
-            GraspSet.gripper_id,
-            ObjectVersion.version.label("ov"),
-            GripperVersion.version.label("gv"),
-        )
-        .join(ObjectModel, ObjectModel.id == GraspSet.object_id)
-        .join(Gripper, Gripper.id == GraspSet.gripper_id)
-        .join(ObjectVersion, ObjectVersion.id == GraspSet.object_version_id)
-        .join(GripperVersion, GripperVersion.id == GraspSet.gripper_version_id)
-        .where(ObjectModel.name == object, Gripper.name == gripper, GraspSet.version == version)
+        _with_names(
+            select(
+                GraspSet.id,
+                GraspSet.version,
+                GraspSet.export_key,
+                GraspSet.export_sha256,
+                GraspSet.withdrawn_at,
+                GraspSet.object_id,
+                GraspSet.gripper_id,
+                ObjectVersion.version.label("ov"),
+                GripperVersion.version.label("gv"),
+            )
+        ).where(ObjectModel.name == object, Gripper.name == gripper, GraspSet.version == version)
     ).first()
     if row is None:
         _pair_ids(session, object, gripper)

@@ -41,14 +41,10 @@ def resolve(session: Session, *, grasp_set: int | None, object: str | None, grip
         if not object or not gripper:
             raise ApiError(422, "validation-error", "give either grasp_set, or object and gripper")
         grasp_set = grasp_sets.catalogue_entry(session, object, gripper, None).id
-    row = session.execute(
-        select(GraspSet.id, GraspSet.version, GraspSet.candidates_key, GripperVersion.spec)
-        .join(GripperVersion, GripperVersion.id == GraspSet.gripper_version_id)
-        .where(GraspSet.id == grasp_set)
-    ).first()
-    if row is None:
-        raise ApiError(404, "not-found", f"no grasp set {grasp_set}")
-    return PickRef(*row)
+    q = select(GraspSet.id, GraspSet.version, GraspSet.candidates_key, GripperVersion.spec).join(
+        GripperVersion, GripperVersion.id == GraspSet.gripper_version_id
+    )
+    return PickRef(*grasp_sets.grasp_set_row(session, grasp_set, q))
 
 
 _lock = threading.Lock()
