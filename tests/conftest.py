@@ -2,13 +2,25 @@
 
 `shared_meshes` is the folder of permissive test meshes handed to developers and CI (`../shared/meshes` beside
 the repository, see its MANIFEST.md). Tests that need it skip, with the path in the reason, when it is missing.
+
+The service tests' fixtures (tests/services_conftest.py) are loaded here as the module `services_conftest`, without
+putting tests/ on sys.path, where tests/graspgen/ would shadow the graspgen package; the conftest.py of tests/api,
+integration, reliability and worker import its fixtures from it.
 """
 
 from __future__ import annotations
 
+import importlib.util
+import sys
 from pathlib import Path
 
 import pytest
+
+if "services_conftest" not in sys.modules:
+    _spec = importlib.util.spec_from_file_location("services_conftest", Path(__file__).parent / "services_conftest.py")
+    _module = importlib.util.module_from_spec(_spec)
+    sys.modules["services_conftest"] = _module
+    _spec.loader.exec_module(_module)
 
 #: ../shared/meshes relative to the repository root (this file is tests/conftest.py)
 SHARED_MESHES = (Path(__file__).resolve().parents[1].parent / "shared" / "meshes").resolve()
