@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import sys
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
@@ -243,6 +244,30 @@ def broker_settings() -> dict[str, str]:
     return {"broker_url": f"{REDIS_URL}/{redis_db()}", "broker_key_prefix": prefix, "queue": prefix.rstrip(":")}
 
 
+@contextlib.contextmanager
+def pg_values(
+    root: Path, schema: str, *, broker: bool = True, **extra: object
+) -> Iterator[tuple[dict[str, object], dict[str, str]]]:
+    """Settings values of a service on the PostgreSQL `schema` with its files in `root` (storage root/var, a new
+    tokens file root/tokens.json) and, with `broker`, a Redis queue of its own (emptied afterwards); `extra` adds or
+    overrides values. Yields (values, tokens); the values go to Settings(**values) or settings_env(**values)."""
+    tokens = write_tokens_file(root / "tokens.json")
+    queue = broker_settings() if broker else {}
+    values = {
+        "database_url": PG_URL,
+        "database_schema": schema,
+        "storage_dir": root / "var",
+        "tokens_file": root / "tokens.json",
+        **queue,
+        **extra,
+    }
+    try:
+        yield values, tokens
+    finally:
+        if queue:
+            redis_cleanup(queue["broker_key_prefix"])
+
+
 @pytest.fixture(scope="session")
 def pg_service(pg_schema, tmp_path_factory) -> Iterator[Service]:
     """The API on the shared PostgreSQL schema, sending jobs to Redis (no worker consumes them here)."""
@@ -251,20 +276,10 @@ def pg_service(pg_schema, tmp_path_factory) -> Iterator[Service]:
     from services.api.app import create_app
     from services.common.settings import Settings
 
-    root = tmp_path_factory.mktemp("pg-service")
-    tokens = write_tokens_file(root / "tokens.json")
-    broker = broker_settings()
-    settings = Settings(
-        database_url=PG_URL,
-        database_schema=pg_schema,
-        storage_dir=root / "var",
-        tokens_file=root / "tokens.json",
-        max_upload_bytes=256 * 1024,
-        **broker,
-    )
-    with TestClient(create_app(settings)) as client:
-        yield Service(client, settings, tokens)
-    redis_cleanup(broker["broker_key_prefix"])
+    with pg_values(tmp_path_factory.mktemp("pg-service"), pg_schema, max_upload_bytes=256 * 1024) as (values, tokens):
+        settings = Settings(**values)
+        with TestClient(create_app(settings)) as client:
+            yield Service(client, settings, tokens)
 
 
 @pytest.fixture(scope="session")
@@ -376,27 +391,64 @@ def stop_process(proc, timeout: float = 30.0) -> None:  # type: ignore[no-untype
         proc.wait(10)
 
 
-def start_serve(env: dict[str, str], log: Path):  # type: ignore[no-untyped-def]
-    """A real `graspgen serve` on a free port with `env`, its output in `log`: (process, base URL) once it answers
-    /healthz; stopped again if it never does."""
+#: this venv's `graspgen` command
+GRASPGEN = str(Path(sys.executable).with_name("graspgen"))
+
+
+def start_serve(  # type: ignore[no-untyped-def]
+    env: dict[str, str],
+    log: Path,
+    *args: str,
+    err: Path | None = None,
+    graspgen: str = GRASPGEN,
+    cwd: Path | None = None,
+    timeout: float = 90.0,
+):
+    """A real `graspgen serve` (this venv's, or the `graspgen` command given) on a free port with `env` and extra
+    `args`, its output in `log` (its stderr, where uvicorn logs, in `err` when given): (process, base URL) once it
+    answers /healthz; stopped again if it never does."""
     import subprocess
-    import sys
 
     port = free_port()
-    with open(log, "wb") as out:
+    with open(log, "wb") as out, open(err, "wb") if err else contextlib.nullcontext(subprocess.STDOUT) as errors:
         proc = subprocess.Popen(
-            [str(Path(sys.executable).with_name("graspgen")), "serve", "--port", str(port)],
-            env=env,
-            stdout=out,
-            stderr=subprocess.STDOUT,
+            [graspgen, "serve", "--port", str(port), *args], env=env, cwd=cwd, stdout=out, stderr=errors
         )
     try:
-        wait_for_log(log, "Uvicorn running", proc)
+        wait_for_log(err or log, "Uvicorn running", proc, timeout)
         wait_http(f"http://127.0.0.1:{port}/healthz")
     except Exception:
         stop_process(proc)
         raise
     return proc, f"http://127.0.0.1:{port}"
+
+
+def start_worker(  # type: ignore[no-untyped-def]
+    env: dict[str, str],
+    log: Path,
+    *,
+    command: list[str] | None = None,
+    concurrency: int = 1,
+    hostname: str | None = None,
+    wait: bool = True,
+    **popen: object,
+):
+    """A Celery worker process (`command worker`; by default `python -m services.cli worker` of this interpreter)
+    with `env`, its output in `log`, under a hostname of its own; once its log says it is ready (`wait`), else at
+    once (the caller waits: `wait_for_log(log, " ready.", proc)`). Stopped again if it never gets ready."""
+    import subprocess
+
+    cmd = command or [sys.executable, "-m", "services.cli"]
+    args = ["worker", "--concurrency", str(concurrency), "--hostname", f"{hostname or unique_name('w')}@%h"]
+    with open(log, "wb") as out:
+        proc = subprocess.Popen([*cmd, *args], env=env, stdout=out, stderr=subprocess.STDOUT, **popen)
+    if wait:
+        try:
+            wait_for_log(log, " ready.", proc)
+        except Exception:
+            stop_process(proc)
+            raise
+    return proc
 
 
 def settings_env(**values: object) -> dict[str, str]:

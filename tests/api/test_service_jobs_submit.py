@@ -171,27 +171,21 @@ def test_bulk_request_shape_is_validated(pg_service):
 
 def test_broker_down_is_503_and_leaves_no_rows(pg_schema, tmp_path, pg_service, pair):
     from fastapi.testclient import TestClient
-    from services_conftest import PG_URL, Service, write_tokens_file
+    from services_conftest import Service, pg_values
 
     from services.api.app import create_app
     from services.common.settings import Settings
 
-    tokens = write_tokens_file(tmp_path / "tokens.json")
-    settings = Settings(
-        database_url=PG_URL,
-        database_schema=pg_schema,
-        storage_dir=tmp_path / "var",
-        tokens_file=tmp_path / "tokens.json",
-        broker_url="redis://127.0.0.1:1/0",
-    )
-    with TestClient(create_app(settings)) as client:
-        svc = Service(client, settings, tokens)
-        obj, grip = pair
-        before = svc.row_counts()
-        r = svc.post("/v1/jobs", json={"object": obj, "gripper": grip})
-        assert r.status_code == 503 and r.headers["content-type"] == PROBLEM and "retry-after" in r.headers
-        r = svc.post("/v1/bulk-jobs", json={"items": [{"object": obj, "gripper": grip}]})
-        assert r.status_code == 503
-        assert svc.row_counts() == before
-        ready = svc.client.get("/readyz")
-        assert ready.status_code == 503 and ready.json()["checks"]["broker"] == "unreachable"
+    with pg_values(tmp_path, pg_schema, broker=False, broker_url="redis://127.0.0.1:1/0") as (values, tokens):
+        settings = Settings(**values)
+        with TestClient(create_app(settings)) as client:
+            svc = Service(client, settings, tokens)
+            obj, grip = pair
+            before = svc.row_counts()
+            r = svc.post("/v1/jobs", json={"object": obj, "gripper": grip})
+            assert r.status_code == 503 and r.headers["content-type"] == PROBLEM and "retry-after" in r.headers
+            r = svc.post("/v1/bulk-jobs", json={"items": [{"object": obj, "gripper": grip}]})
+            assert r.status_code == 503
+            assert svc.row_counts() == before
+            ready = svc.client.get("/readyz")
+            assert ready.status_code == 503 and ready.json()["checks"]["broker"] == "unreachable"

@@ -12,13 +12,10 @@ import pytest
 from fastapi.testclient import TestClient
 from services_conftest import (
     GRIPPER,
-    PG_URL,
     Service,
     box_stl,
-    broker_settings,
-    redis_cleanup,
+    pg_values,
     slug,
-    write_tokens_file,
 )
 
 from graspgen import memory
@@ -33,27 +30,18 @@ pytestmark = [pytest.mark.integration, pytest.mark.slow]  # runs the core
 @pytest.fixture
 def make_service(pg_schema, tmp_path):
     made = []
-    tokens = write_tokens_file(tmp_path / "tokens.json")
-    broker = broker_settings()
+    with pg_values(tmp_path, pg_schema) as (values, tokens):
 
-    def make(budget: int) -> Service:
-        settings = Settings(
-            database_url=PG_URL,
-            database_schema=pg_schema,
-            storage_dir=tmp_path / "var",
-            tokens_file=tmp_path / "tokens.json",
-            worker_memory_bytes=budget,
-            **broker,
-        )
-        client = TestClient(create_app(settings))
-        client.__enter__()
-        made.append(client)
-        return Service(client, settings, tokens)
+        def make(budget: int) -> Service:
+            settings = Settings(**values, worker_memory_bytes=budget)
+            client = TestClient(create_app(settings))
+            client.__enter__()
+            made.append(client)
+            return Service(client, settings, tokens)
 
-    yield make
-    for c in made:
-        c.__exit__(None, None, None)
-    redis_cleanup(broker["broker_key_prefix"])
+        yield make
+        for c in made:
+            c.__exit__(None, None, None)
 
 
 @pytest.fixture(scope="module")

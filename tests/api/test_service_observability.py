@@ -8,13 +8,10 @@ import re
 import pytest
 from services_conftest import (
     GRIPPER,
-    PG_URL,
     box_stl,
-    broker_settings,
-    redis_cleanup,
+    pg_values,
     seed_grasp_sets,
     slug,
-    write_tokens_file,
 )
 
 pytestmark = pytest.mark.integration
@@ -123,20 +120,9 @@ def limited_service(pg_schema, tmp_path):
     from services.api.app import create_app
     from services.common.settings import Settings
 
-    tokens = write_tokens_file(tmp_path / "tokens.json")
-    broker = broker_settings()
-    settings = Settings(
-        database_url=PG_URL,
-        database_schema=pg_schema,
-        storage_dir=tmp_path / "var",
-        tokens_file=tmp_path / "tokens.json",
-        rate_limit_per_s=0.5,
-        rate_limit_burst=3,
-        **broker,
-    )
-    with TestClient(create_app(settings)) as client:
-        yield client, tokens
-    redis_cleanup(broker["broker_key_prefix"])
+    limits = {"rate_limit_per_s": 0.5, "rate_limit_burst": 3}
+    with pg_values(tmp_path, pg_schema, **limits) as (values, tokens), TestClient(create_app(Settings(**values))) as c:
+        yield c, tokens
 
 
 def test_rate_limit_per_token_answers_429_with_retry_after(limited_service):

@@ -8,24 +8,17 @@ graspgen.pick on the downloaded candidates), an empty pick with its reason, refu
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 from services_conftest import (
     GRIPPER,
-    PG_URL,
-    broker_settings,
     cylinder_stl,
-    redis_cleanup,
+    pg_values,
     settings_env,
     slug,
     start_serve,
+    start_worker,
     stop_process,
-    unique_name,
-    wait_for_log,
-    write_tokens_file,
 )
 
 import graspgen
@@ -43,42 +36,17 @@ DOWN = {"direction": [0, 0, -1], "max_angle_deg": 60}
 def postgres_stack(pg_schema, tmp_path_factory):
     """`graspgen serve` and `graspgen worker` (subprocesses) on PostgreSQL and Redis, sharing a storage directory."""
     root = tmp_path_factory.mktemp("client-pg")
-    tokens = write_tokens_file(root / "tokens.json")
-    broker = broker_settings()
-    values = dict(
-        database_url=PG_URL,
-        database_schema=pg_schema,
-        storage_dir=root / "var",
-        tokens_file=root / "tokens.json",
-        progress_interval_s=0.1,
-        **broker,
-    )
-    with open(root / "worker.log", "wb") as out:
-        worker = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "services.cli",
-                "worker",
-                "--concurrency",
-                "1",
-                "--hostname",
-                f"{unique_name('w')}@%h",
-            ],
-            env=settings_env(**values),
-            stdout=out,
-            stderr=subprocess.STDOUT,
-        )
-    server = None
-    try:
-        wait_for_log(root / "worker.log", " ready.", worker)
-        server, url = start_serve(settings_env(**values), root / "serve.log")
-        yield url, tokens["writer"]
-    finally:
-        if server is not None:
-            stop_process(server)
-        stop_process(worker)
-        redis_cleanup(broker["broker_key_prefix"])
+    with pg_values(root, pg_schema, progress_interval_s=0.1) as (values, tokens):
+        env = settings_env(**values)
+        worker = start_worker(env, root / "worker.log")
+        server = None
+        try:
+            server, url = start_serve(env, root / "serve.log")
+            yield url, tokens["writer"]
+        finally:
+            if server is not None:
+                stop_process(server)
+            stop_process(worker)
 
 
 @pytest.fixture(scope="module")

@@ -5,32 +5,18 @@ from __future__ import annotations
 
 import stat
 import subprocess
-import sys
 from pathlib import Path
 
 import httpx
 import pytest
-from services_conftest import free_port, settings_env, stop_process, wait_for_log, wait_http
+from services_conftest import settings_env, start_serve, stop_process
 
 pytestmark = [pytest.mark.integration]
 
 
 def _serve(var: Path, out: Path, err: Path) -> tuple[subprocess.Popen, str]:
-    port = free_port()
-    with open(out, "wb") as o, open(err, "wb") as e:
-        proc = subprocess.Popen(
-            [str(Path(sys.executable).with_name("graspgen")), "serve", "--port", str(port)],
-            env=settings_env(storage_dir=var),
-            stdout=o,
-            stderr=e,
-        )
-    try:
-        wait_for_log(err, "Uvicorn running", proc)
-        wait_http(f"http://127.0.0.1:{port}/healthz")
-    except Exception:
-        stop_process(proc)
-        raise
-    return proc, f"http://127.0.0.1:{port}"
+    """stdout and stderr apart: the token's file is named on stdout, uvicorn logs on stderr."""
+    return start_serve(settings_env(storage_dir=var), out, err=err)
 
 
 def test_serve_writes_the_admin_token_to_an_owner_only_file_and_never_prints_it(tmp_path):

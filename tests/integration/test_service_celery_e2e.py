@@ -8,24 +8,19 @@ tests/reliability/test_worker_kill.py, on a stack whose storage can be checked f
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import time
 
 import pytest
 from services_conftest import (
-    PG_URL,
     Service,
     box_stl,
-    broker_settings,
     cylinder_stl,
-    redis_cleanup,
+    pg_values,
     settings_env,
     slug,
+    start_worker,
     stop_process,
     unique_name,
-    wait_for_log,
-    write_tokens_file,
 )
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.xdist_group("celery-e2e")]
@@ -41,45 +36,24 @@ def stack(pg_schema, s3_server, tmp_path_factory):
     from services.common.settings import Settings
 
     root = tmp_path_factory.mktemp("celery-e2e")
-    tokens = write_tokens_file(root / "tokens.json")
-    values = dict(
-        database_url=PG_URL,
-        database_schema=pg_schema,
-        storage_dir=root / "var",
+    with pg_values(
+        root,
+        pg_schema,
         storage_url=f"s3://{s3_server['bucket']}/{unique_name('e2e')}",
         s3_endpoint_url=s3_server["endpoint"],
-        tokens_file=root / "tokens.json",
         job_soft_time_limit_s=120,
         job_time_limit_s=150,
         broker_visibility_timeout_s=300,
         progress_interval_s=0.1,
-        **broker_settings(),
-    )
-    settings = Settings(**values)
-    log = root / "worker.log"
-    with open(log, "wb") as out:
-        proc = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "services.cli",
-                "worker",
-                "--concurrency",
-                "1",
-                "--hostname",
-                f"{unique_name('w')}@%h",
-            ],
-            env=settings_env(**values),
-            stdout=out,
-            stderr=subprocess.STDOUT,
-        )
-    try:
-        wait_for_log(log, " ready.", proc)
-        with TestClient(create_app(settings)) as client:
-            yield Service(client, settings, tokens), proc, log
-    finally:
-        stop_process(proc)
-        redis_cleanup(settings.broker_key_prefix)
+    ) as (values, tokens):
+        log = root / "worker.log"
+        proc = start_worker(settings_env(**values), log)
+        try:
+            settings = Settings(**values)
+            with TestClient(create_app(settings)) as client:
+                yield Service(client, settings, tokens), proc, log
+        finally:
+            stop_process(proc)
 
 
 @pytest.fixture(scope="module")

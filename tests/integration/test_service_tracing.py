@@ -7,8 +7,6 @@ shows the queue depth."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 import time
 import uuid
 from pathlib import Path
@@ -16,18 +14,18 @@ from pathlib import Path
 import httpx
 import pytest
 from services_conftest import (
+    GRASPGEN,
     GRIPPER,
     PG_URL,
-    broker_settings,
     cylinder_stl,
     free_port,
-    redis_cleanup,
+    pg_values,
     settings_env,
     slug,
+    start_serve,
+    start_worker,
     stop_process,
-    unique_name,
     wait_for_log,
-    wait_http,
     write_tokens_file,
 )
 
@@ -54,50 +52,24 @@ def _sample(text: str, prefix: str) -> float:
 
 @pytest.fixture()
 def stack(pg_schema, tmp_path):
-    tokens = write_tokens_file(tmp_path / "tokens.json")
-    broker = broker_settings()
-    values = dict(
-        database_url=PG_URL,
-        database_schema=pg_schema,
-        storage_dir=tmp_path / "var",
-        tokens_file=tmp_path / "tokens.json",
-        log_format="json",
-        progress_interval_s=0.1,
-        **broker,
-    )
     metrics_port = free_port()
-    worker_log, api_log = tmp_path / "worker.log", tmp_path / "api.log"
-    with open(worker_log, "wb") as out:
-        worker = subprocess.Popen(
-            [
-                str(Path(sys.executable).with_name("graspgen")),
-                "worker",
-                "--concurrency",
-                "1",
-                "--hostname",
-                f"{unique_name('w')}@%h",
-            ],
-            env=settings_env(**values, metrics_port=metrics_port, metrics_dir=tmp_path / "metrics"),
-            stdout=out,
-            stderr=subprocess.STDOUT,
+    worker_log = tmp_path / "worker.log"
+    with pg_values(tmp_path, pg_schema, log_format="json", progress_interval_s=0.1) as (values, tokens):
+        worker = start_worker(
+            settings_env(**values, metrics_port=metrics_port, metrics_dir=tmp_path / "metrics"),
+            worker_log,
+            command=[GRASPGEN],
+            wait=False,
         )
-    port = free_port()
-    with open(api_log, "wb") as out:
-        api = subprocess.Popen(
-            [str(Path(sys.executable).with_name("graspgen")), "serve", "--port", str(port)],
-            env=settings_env(**values),
-            stdout=out,
-            stderr=subprocess.STDOUT,
-        )
-    try:
-        wait_for_log(worker_log, " ready.", worker)
-        wait_for_log(api_log, "Uvicorn running", api)
-        wait_http(f"http://127.0.0.1:{port}/healthz")
-        yield f"http://127.0.0.1:{port}", f"http://127.0.0.1:{metrics_port}/metrics", tokens, api_log, worker_log
-    finally:
-        stop_process(api)
-        stop_process(worker)
-        redis_cleanup(broker["broker_key_prefix"])
+        api = None
+        try:
+            api, url = start_serve(settings_env(**values), tmp_path / "api.log")
+            wait_for_log(worker_log, " ready.", worker)
+            yield url, f"http://127.0.0.1:{metrics_port}/metrics", tokens, tmp_path / "api.log", worker_log
+        finally:
+            if api is not None:
+                stop_process(api)
+            stop_process(worker)
 
 
 def test_request_id_follows_the_job_into_the_worker_and_metrics_count_it(stack, pg_schema):
@@ -162,19 +134,10 @@ def test_request_id_follows_the_job_into_the_worker_and_metrics_count_it(stack, 
 def test_embedded_jobs_carry_the_request_id_into_their_log_lines(tmp_path):
     """The embedded pool runs the same task in the API process; the id travels with it the same way."""
     tokens = write_tokens_file(tmp_path / "tokens.json")
-    port = free_port()
     log = tmp_path / "serve.log"
-    with open(log, "wb") as out:
-        proc = subprocess.Popen(
-            [str(Path(sys.executable).with_name("graspgen")), "serve", "--port", str(port)],
-            env=settings_env(storage_dir=tmp_path / "var", tokens_file=tmp_path / "tokens.json", log_format="json"),
-            stdout=out,
-            stderr=subprocess.STDOUT,
-        )
+    env = settings_env(storage_dir=tmp_path / "var", tokens_file=tmp_path / "tokens.json", log_format="json")
+    proc, url = start_serve(env, log)
     try:
-        wait_for_log(log, "Uvicorn running", proc)
-        url = f"http://127.0.0.1:{port}"
-        wait_http(url + "/healthz")
         w = {"Authorization": f"Bearer {tokens['writer']}"}
         with httpx.Client(base_url=url, timeout=60) as c:
             up = c.post(
@@ -211,49 +174,30 @@ def test_embedded_jobs_carry_the_request_id_into_their_log_lines(tmp_path):
 def test_serve_with_two_processes_reports_the_sum_of_both(pg_schema, tmp_path):
     """`serve --workers 2`: prometheus-client's multiprocess mode, so /metrics (from whichever process answers) and the
     metrics port count the requests of both processes."""
-    tokens = write_tokens_file(tmp_path / "tokens.json")
-    broker = broker_settings()
-    port, metrics_port = free_port(), free_port()
+    metrics_port = free_port()
     log = tmp_path / "serve.log"
-    values = dict(
-        database_url=PG_URL,
-        database_schema=pg_schema,
-        storage_dir=tmp_path / "var",
-        tokens_file=tmp_path / "tokens.json",
-        metrics_port=metrics_port,
-        metrics_dir=tmp_path / "metrics",
-        log_format="json",
-        **broker,
-    )
-    with open(log, "wb") as out:
-        proc = subprocess.Popen(
-            [str(Path(sys.executable).with_name("graspgen")), "serve", "--port", str(port), "--workers", "2"],
-            env=settings_env(**values),
-            stdout=out,
-            stderr=subprocess.STDOUT,
-        )
-    try:
-        wait_for_log(log, "Uvicorn running", proc)
-        url = f"http://127.0.0.1:{port}"
-        wait_http(url + "/healthz")
-        answered: set[int] = set()
-        end = time.monotonic() + 60
-        n = 0
-        while len(answered) < 2:  # until both processes have answered (each logs its own access lines)
-            assert time.monotonic() < end, "one process answered everything"
-            with httpx.Client(base_url=url, timeout=10) as c:  # a new connection: either process may take it
-                c.get("/healthz", headers={"X-Request-ID": f"probe-{n}"})
-                n += 1
-            time.sleep(0.05)
-            answered = {d["process"] for d in _json_lines(log) if (d["request_id"] or "").startswith("probe-")}
-        prefix = 'graspgen_http_request_duration_seconds_count{method="GET",route="/healthz",status="200"}'
-        text = httpx.get(f"http://127.0.0.1:{metrics_port}/metrics", timeout=10).text
-        assert _sample(text, prefix) >= n  # (wait_http's own probes come on top)
-        admin = {"Authorization": f"Bearer {tokens['admin']}"}
-        assert _sample(httpx.get(url + "/metrics", headers=admin, timeout=10).text, prefix) >= n
-        # both processes log their requests (each set up its own JSON logging), each line with its request id
-        access = [d for d in _json_lines(log) if "GET /healthz" in d["message"]]
-        assert all(d["request_id"] for d in access)
-    finally:
-        stop_process(proc)
-        redis_cleanup(broker["broker_key_prefix"])
+    with pg_values(
+        tmp_path, pg_schema, metrics_port=metrics_port, metrics_dir=tmp_path / "metrics", log_format="json"
+    ) as (values, tokens):
+        proc, url = start_serve(settings_env(**values), log, "--workers", "2")
+        try:
+            answered: set[int] = set()
+            end = time.monotonic() + 60
+            n = 0
+            while len(answered) < 2:  # until both processes have answered (each logs its own access lines)
+                assert time.monotonic() < end, "one process answered everything"
+                with httpx.Client(base_url=url, timeout=10) as c:  # a new connection: either process may take it
+                    c.get("/healthz", headers={"X-Request-ID": f"probe-{n}"})
+                    n += 1
+                time.sleep(0.05)
+                answered = {d["process"] for d in _json_lines(log) if (d["request_id"] or "").startswith("probe-")}
+            prefix = 'graspgen_http_request_duration_seconds_count{method="GET",route="/healthz",status="200"}'
+            text = httpx.get(f"http://127.0.0.1:{metrics_port}/metrics", timeout=10).text
+            assert _sample(text, prefix) >= n  # (wait_http's own probes come on top)
+            admin = {"Authorization": f"Bearer {tokens['admin']}"}
+            assert _sample(httpx.get(url + "/metrics", headers=admin, timeout=10).text, prefix) >= n
+            # both processes log their requests (each set up its own JSON logging), each line with its request id
+            access = [d for d in _json_lines(log) if "GET /healthz" in d["message"]]
+            assert all(d["request_id"] for d in access)
+        finally:
+            stop_process(proc)

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import httpx
 import pytest
-from services_conftest import GRIPPER, box_stl, free_port, settings_env, stop_process, wait_for_log, wait_http
+from services_conftest import GRIPPER, box_stl, settings_env, start_serve, stop_process
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
@@ -112,16 +112,8 @@ def test_migrate_serve_and_one_job_from_the_wheel(wheel_venv, tmp_path):
     assert migrate.returncode == 0, migrate.stderr
     assert "is at head" in migrate.stdout and (var / "graspgen.sqlite3").is_file()
 
-    port = free_port()
-    log_path = tmp_path / "serve.log"
-    with open(log_path, "wb") as out:
-        proc = subprocess.Popen(
-            [graspgen, "serve", "--port", str(port)], cwd=tmp_path, env=env, stdout=out, stderr=subprocess.STDOUT
-        )
+    proc, url = start_serve(env, tmp_path / "serve.log", graspgen=graspgen, cwd=tmp_path, timeout=300)
     try:
-        wait_for_log(log_path, "Uvicorn running", proc, timeout=300)
-        url = f"http://127.0.0.1:{port}"
-        wait_http(url + "/healthz")
         token = (var / "admin-token").read_text().strip()
         with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {token}"}, timeout=600) as c:
             up = c.post("/v1/objects", files={"file": ("box.stl", box_stl())}, data={"name": "box", "units": "mm"})

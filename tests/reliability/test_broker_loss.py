@@ -10,7 +10,7 @@ from datetime import timedelta
 
 import pytest
 from services_conftest import box_stl, cylinder_stl
-from worker_stack import SMALL, make_stack
+from worker_stack import SMALL, stack_fixture, stopping_workers
 
 from services.common.models import utcnow
 from services.worker.reconcile import Reconciler
@@ -22,16 +22,8 @@ LIMITS = dict(job_soft_time_limit_s=10, job_time_limit_s=12, broker_visibility_t
 GRACE = 1  # reconcile_grace_s of the stack
 
 
-@pytest.fixture(scope="module")
-def stack(tmp_path_factory):
-    with make_stack(tmp_path_factory.mktemp("broker-loss"), **LIMITS) as s:
-        yield s
-
-
-@pytest.fixture(autouse=True)
-def _stop_workers(stack):
-    yield
-    stack.stop_workers()
+stack = stack_fixture("broker-loss", **LIMITS)
+_stop_workers = stopping_workers()
 
 
 def wait_log(worker, needle: str, count: int = 1, timeout: float = 60.0) -> str:

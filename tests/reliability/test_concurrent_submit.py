@@ -13,7 +13,7 @@ from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 
 import pytest
-from services_conftest import PG_URL, Service, slug, write_tokens_file
+from services_conftest import PG_URL, Service, pg_values, slug
 from sqlalchemy import func, select
 
 from services.common.models import GraspSet, Job, ObjectVersion
@@ -35,16 +35,10 @@ def embedded(fresh_pg_schema, tmp_path) -> Iterator[Service]:
     from services.common.settings import Settings
 
     upgrade(Settings(database_url=PG_URL, database_schema=fresh_pg_schema))
-    tokens = write_tokens_file(tmp_path / "tokens.json")
-    settings = Settings(
-        database_url=PG_URL,
-        database_schema=fresh_pg_schema,
-        storage_dir=tmp_path / "var",
-        tokens_file=tmp_path / "tokens.json",
-        embedded_workers=2,
-    )
-    with TestClient(create_app(settings)) as client:
-        yield Service(client, settings, tokens)
+    with pg_values(tmp_path, fresh_pg_schema, broker=False, embedded_workers=2) as (values, tokens):
+        settings = Settings(**values)
+        with TestClient(create_app(settings)) as client:
+            yield Service(client, settings, tokens)
 
 
 def at_once(fn, n: int = N) -> list:  # type: ignore[no-untyped-def]

@@ -15,11 +15,9 @@ from services_conftest import (
     PG_URL,
     Service,
     _pg_admin,
-    broker_settings,
-    redis_cleanup,
+    pg_values,
     seed_grasp_sets,
     slug,
-    write_tokens_file,
 )
 from sqlalchemy import event, func, select
 
@@ -77,22 +75,12 @@ def own_service(fresh_pg_schema, tmp_path) -> Iterator[tuple[Service, Backends]]
     from services.common.settings import Settings
 
     upgrade(Settings(database_url=PG_URL, database_schema=fresh_pg_schema))
-    tokens = write_tokens_file(tmp_path / "tokens.json")
-    broker = broker_settings()
-    settings = Settings(
-        database_url=PG_URL,
-        database_schema=fresh_pg_schema,
-        storage_dir=tmp_path / "var",
-        tokens_file=tmp_path / "tokens.json",
-        **broker,
-    )
-    app = create_app(settings)
-    backends = Backends(app.state.db.engine)
-    try:
+    with pg_values(tmp_path, fresh_pg_schema) as (values, tokens):
+        settings = Settings(**values)
+        app = create_app(settings)
+        backends = Backends(app.state.db.engine)
         with TestClient(app) as client:
             yield Service(client, settings, tokens), backends
-    finally:
-        redis_cleanup(broker["broker_key_prefix"])
 
 
 def assert_db_unavailable(r) -> None:  # type: ignore[no-untyped-def]

@@ -9,26 +9,13 @@ be a 422 problem+json, store nothing, and grow the peak by less than 100 MB.
 from __future__ import annotations
 
 import io
-import subprocess
 import sys
 from pathlib import Path
 
 import httpx
 import numpy as np
 import pytest
-from services_conftest import (
-    PG_URL,
-    box_stl,
-    broker_settings,
-    free_port,
-    redis_cleanup,
-    settings_env,
-    slug,
-    stop_process,
-    wait_for_log,
-    wait_http,
-    write_tokens_file,
-)
+from services_conftest import box_stl, pg_values, settings_env, slug, start_serve, stop_process
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "corpus"))
 import make_corpus as mc  # noqa: E402
@@ -48,34 +35,13 @@ def _peak_mb(pid: int) -> float:
 
 @pytest.fixture
 def server(tmp_path, pg_schema):
-    tokens = write_tokens_file(tmp_path / "tokens.json")
-    broker = broker_settings()
-    env = settings_env(
-        storage_dir=tmp_path / "var",
-        tokens_file=tmp_path / "tokens.json",
-        database_url=PG_URL,
-        database_schema=pg_schema,
-        **broker,
-    )
-    port = free_port()
-    log = tmp_path / "serve.log"
-    with open(log, "wb") as out:
-        proc = subprocess.Popen(
-            [str(Path(sys.executable).with_name("graspgen")), "serve", "--port", str(port)],
-            env=env,
-            stdout=out,
-            stderr=subprocess.STDOUT,
-        )
-    try:
-        wait_for_log(log, "Uvicorn running", proc)
-        wait_http(f"http://127.0.0.1:{port}/healthz")
-        with httpx.Client(
-            base_url=f"http://127.0.0.1:{port}", headers={"Authorization": f"Bearer {tokens['writer']}"}, timeout=120
-        ) as c:
-            yield proc, c
-    finally:
-        stop_process(proc)
-        redis_cleanup(broker["broker_key_prefix"])
+    with pg_values(tmp_path, pg_schema) as (values, tokens):
+        proc, url = start_serve(settings_env(**values), tmp_path / "serve.log")
+        try:
+            with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {tokens['writer']}"}, timeout=120) as c:
+                yield proc, c
+        finally:
+            stop_process(proc)
 
 
 def _upload(c: httpx.Client, name: str, filename: str, data: bytes) -> httpx.Response:

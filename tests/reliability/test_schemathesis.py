@@ -14,13 +14,11 @@ import pytest
 from services_conftest import (
     PG_URL,
     Service,
-    broker_settings,
     create_schema,
     drop_schema,
-    redis_cleanup,
+    pg_values,
     seed_grasp_sets,
     unique_name,
-    write_tokens_file,
 )
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
@@ -37,36 +35,27 @@ def st_app(tmp_path_factory):  # type: ignore[no-untyped-def]
     session schema holds other apps' grasp sets, whose artifacts this app's storage does not have), with an object,
     a gripper and grasp sets, so that generated ids and names sometimes exist."""
     from fastapi.testclient import TestClient
+    from schemathesis.python import asgi
 
     from services.api.app import create_app
     from services.common.migrate import upgrade
     from services.common.settings import Settings
 
-    root = tmp_path_factory.mktemp("schemathesis")
-    tokens = write_tokens_file(root / "tokens.json")
-    broker = broker_settings()
     pg = unique_name("ggst")
     create_schema(pg)
-    settings = Settings(
-        database_url=PG_URL,
-        database_schema=pg,
-        storage_dir=root / "var",
-        tokens_file=root / "tokens.json",
-        max_upload_bytes=256 * 1024,
-        **broker,
-    )
-    upgrade(settings)
-    app = create_app(settings)
-    seed_grasp_sets(
-        Service(TestClient(app), settings, tokens), "pgn-80", ["part-a", "part-b"], version_of={"part-a": 2}
-    )
     try:
-        yield app, tokens
+        with pg_values(tmp_path_factory.mktemp("schemathesis"), pg, max_upload_bytes=256 * 1024) as (values, tokens):
+            settings = Settings(**values)
+            upgrade(settings)
+            app = create_app(settings)
+            seed_grasp_sets(
+                Service(TestClient(app), settings, tokens), "pgn-80", ["part-a", "part-b"], version_of={"part-a": 2}
+            )
+            try:
+                yield app, tokens
+            finally:
+                asgi.shutdown_lifespans()
     finally:
-        from schemathesis.python import asgi
-
-        asgi.shutdown_lifespans()
-        redis_cleanup(broker["broker_key_prefix"])
         drop_schema(pg)
 
 

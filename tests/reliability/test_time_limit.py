@@ -13,7 +13,7 @@ from __future__ import annotations
 import pytest
 from services_conftest import cylinder_stl
 from stuck_kernel import STUCK_SEED
-from worker_stack import SMALL, make_stack
+from worker_stack import SMALL, stack_fixture
 
 # one xdist worker per module: its stack (redis-server, schema, workers) is set up once
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.xdist_group("reliability-time-limit")]
@@ -22,10 +22,7 @@ pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.xdist_group
 LIMITS = dict(job_soft_time_limit_s=8, job_time_limit_s=10, broker_visibility_timeout_s=12)
 
 
-@pytest.fixture(scope="module")
-def stack(tmp_path_factory):
-    with make_stack(tmp_path_factory.mktemp("time-limit"), **LIMITS) as s:
-        yield s
+stack = stack_fixture("time-limit", **LIMITS)
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import pytest
 from services_conftest import box_stl, cylinder_stl
-from worker_stack import SMALL, make_stack
+from worker_stack import SMALL, stack_fixture, stopping_workers
 
 # one xdist worker per module: its stack (redis-server, schema, workers) is set up once
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.xdist_group("reliability-worker-kill")]
@@ -20,16 +20,8 @@ pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.xdist_group
 LIMITS = dict(job_soft_time_limit_s=10, job_time_limit_s=12, broker_visibility_timeout_s=14, reconcile_grace_s=60)
 
 
-@pytest.fixture(scope="module")
-def stack(tmp_path_factory):
-    with make_stack(tmp_path_factory.mktemp("worker-kill"), **LIMITS) as s:
-        yield s
-
-
-@pytest.fixture(autouse=True)
-def _stop_workers(stack):
-    yield
-    stack.stop_workers()
+stack = stack_fixture("worker-kill", **LIMITS)
+_stop_workers = stopping_workers()
 
 
 def test_killed_prefork_child_redelivers_once_without_leftovers(stack):

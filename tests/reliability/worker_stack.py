@@ -17,6 +17,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import pytest
 from services_conftest import (
     PG_URL,
     Service,
@@ -25,6 +26,7 @@ from services_conftest import (
     free_port,
     settings_env,
     slug,
+    start_worker,
     stop_process,
     unique_name,
     wait_for_log,
@@ -142,22 +144,23 @@ class Stack:
         """`graspgen worker` with the stack's settings (plus overrides); `shim` preloads tests/reliability/
         stuck_kernel.py; `own_group` puts it in a process group of its own, so the test can kill all of it."""
         n = len(self.workers) + 1
-        args = ["worker", "--concurrency", str(concurrency), "--hostname", f"{unique_name('w')}-{n}@%h"]
-        if shim:
-            boot = (
-                f"import sys; sys.path.insert(0, {str(HERE)!r}); import stuck_kernel; "
-                "from services.cli import main; sys.exit(main(sys.argv[1:]))"
-            )
-            cmd = [sys.executable, "-c", boot, *args]
-        else:
-            cmd = [sys.executable, "-m", "services.cli", *args]
+        boot = (
+            f"import sys; sys.path.insert(0, {str(HERE)!r}); import stuck_kernel; "
+            "from services.cli import main; sys.exit(main(sys.argv[1:]))"
+        )
         env = settings_env(**{**self.values, **overrides})
         env["TMPDIR"] = str(self.tmp)
         log = self.root / f"worker-{n}.log"
-        with open(log, "wb") as out:
-            proc = subprocess.Popen(
-                cmd, env=env, cwd=REPO, stdout=out, stderr=subprocess.STDOUT, start_new_session=own_group
-            )
+        proc = start_worker(
+            env,
+            log,
+            command=[sys.executable, "-c", boot] if shim else None,
+            concurrency=concurrency,
+            hostname=f"{unique_name('w')}-{n}",
+            wait=False,
+            cwd=REPO,
+            start_new_session=own_group,
+        )
         w = Worker(proc, log, own_group)
         self.workers.append(w)
         wait_for_log(log, " ready.", proc)
@@ -297,3 +300,26 @@ def make_stack(root: Path, **overrides: object) -> Iterator[Stack]:
             workers.pop().stop()
         redis.kill()
         drop_schema(schema)
+
+
+def stack_fixture(name: str, **overrides: object):  # type: ignore[no-untyped-def]
+    """A test module's `stack` fixture: make_stack(**overrides) once for the module (`stack = stack_fixture(...)`)."""
+
+    @pytest.fixture(scope="module", name="stack")
+    def stack(tmp_path_factory):  # type: ignore[no-untyped-def]
+        with make_stack(tmp_path_factory.mktemp(name), **overrides) as s:
+            yield s
+
+    return stack
+
+
+def stopping_workers():  # type: ignore[no-untyped-def]
+    """An autouse fixture that stops the workers each test started, so that a failed test leaves no worker consuming
+    the next test's messages (`_stop_workers = stopping_workers()`)."""
+
+    @pytest.fixture(autouse=True, name="_stop_workers")
+    def _stop_workers(stack):  # type: ignore[no-untyped-def]
+        yield
+        stack.stop_workers()
+
+    return _stop_workers
