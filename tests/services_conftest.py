@@ -16,6 +16,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.grippers import GRIPPER
+
 PG_URL = os.environ.get("GRASPGEN_TEST_PG_URL", "postgresql+psycopg://postgres@127.0.0.1:5432/test")
 REDIS_URL = os.environ.get("GRASPGEN_TEST_REDIS_URL", "redis://127.0.0.1:6379")
 
@@ -125,16 +127,6 @@ def storage_dir(tmp_path: Path) -> Path:
 
 
 # -- test data --------------------------------------------------------------------------------------------------------
-GRIPPER = {
-    "name": "pgn-80",
-    "stroke": 0.08,
-    "finger_width": 0.02,
-    "finger_depth": 0.03,
-    "finger_thickness": 0.01,
-    "palm_depth": 0.02,
-    "friction": 0.5,
-    "pregrasp_clearance": 0.02,
-}
 
 
 def box_stl(extents_mm: tuple[float, float, float] = (40.0, 30.0, 20.0)) -> bytes:

@@ -11,16 +11,7 @@ import trimesh
 import graspgen
 from graspgen.coverage import LEVELS, axis_angles_deg, combined_distance, coverage, coverage_shares
 
-GRIPPER = {
-    "name": "pgn-80",
-    "stroke": 0.08,
-    "finger_width": 0.02,
-    "finger_depth": 0.03,
-    "finger_thickness": 0.01,
-    "friction": 0.5,
-    "pregrasp_clearance": 0.02,
-    "palm_depth": 0.02,
-}
+from ..grippers import GRIPPER
 
 
 def _axis(deg: float) -> list[float]:

@@ -17,18 +17,9 @@ from graspgen.pick import PickIndex
 from graspgen.quality import scores
 from graspgen.transforms import grasp_frames, quaternion_xyzw_to_matrix
 
-GRIPPER = GripperSpec.from_dict(
-    {
-        "name": "pgn-80",
-        "stroke": 0.08,
-        "finger_width": 0.02,
-        "finger_depth": 0.03,
-        "finger_thickness": 0.01,
-        "palm_depth": 0.02,
-        "friction": 0.5,
-        "pregrasp_clearance": 0.02,
-    }
-)
+from .. import grippers
+
+GRIPPER = GripperSpec.from_dict(grippers.GRIPPER)
 
 
 def synthetic(n: int = 300, rolls: int = 8, *, seed: int = 0, quality: bool = False) -> Candidates:

@@ -20,18 +20,9 @@ from graspgen.pipeline import choose_roll
 from graspgen.sampling import sample_surface
 from graspgen.transforms import roll_basis
 
+from ..grippers import GRIPPER
 from . import reference as ref
 
-GRIPPER = {
-    "name": "pgn-80",
-    "stroke": 0.08,
-    "finger_width": 0.02,
-    "finger_depth": 0.03,
-    "finger_thickness": 0.01,
-    "friction": 0.5,
-    "pregrasp_clearance": 0.02,
-    "palm_depth": 0.02,
-}
 ALPHA = math.atan(0.5) / 1.5
 
 

@@ -13,16 +13,7 @@ from graspgen import quality
 from graspgen.errors import InvalidParameterError
 from graspgen.examples import example_part
 
-GRIPPER = {
-    "name": "pgn-80",
-    "stroke": 0.08,
-    "finger_width": 0.02,
-    "finger_depth": 0.03,
-    "finger_thickness": 0.01,
-    "friction": 0.5,
-    "pregrasp_clearance": 0.02,
-    "palm_depth": 0.02,
-}
+from ..grippers import GRIPPER
 
 
 def _plane(z: float, normal_z: float, n: int = 21) -> tuple[np.ndarray, np.ndarray]:
