@@ -239,20 +239,21 @@ def catalogue_entry(session: Session, object: str, gripper: str, version: int | 
                 "object and gripper versions",
             )
         return ExportRef(row.id, row.version, row.export_key, row.export_sha256, bool(row.released), bool(row.stale))
+    q = _with_names(
+        select(
+            GraspSet.id,
+            GraspSet.version,
+            GraspSet.export_key,
+            GraspSet.export_sha256,
+            GraspSet.withdrawn_at,
+            GraspSet.object_id,
+            GraspSet.gripper_id,
+            ObjectVersion.version.label("ov"),
+            GripperVersion.version.label("gv"),
+        )
+    )
     row = session.execute(
-        _with_names(
-            select(
-                GraspSet.id,
-                GraspSet.version,
-                GraspSet.export_key,
-                GraspSet.export_sha256,
-                GraspSet.withdrawn_at,
-                GraspSet.object_id,
-                GraspSet.gripper_id,
-                ObjectVersion.version.label("ov"),
-                GripperVersion.version.label("gv"),
-            )
-        ).where(ObjectModel.name == object, Gripper.name == gripper, GraspSet.version == version)
+        q.where(ObjectModel.name == object, Gripper.name == gripper, GraspSet.version == version)
     ).first()
     if row is None:
         _pair_ids(session, object, gripper)
