@@ -22,6 +22,18 @@ def svc(request):  # type: ignore[no-untyped-def]
     return request.getfixturevalue(request.param)
 
 
+def wait_blocked_by(watch, pid1: int, pid2: list[int], failure) -> None:  # type: ignore[no-untyped-def]
+    """Wait until the backend whose pid the other thread appends to `pid2` once it started waits for a lock that
+    backend `pid1` holds (pg_blocking_pids: pg_stat_activity's query text is not reliable for prepared statements);
+    fail with `failure()` after 120 s: a condition awaited, not a speed, so generous for a loaded machine."""
+    blocked = text("SELECT :p1 = ANY(pg_blocking_pids(:p2))")
+    deadline = time.monotonic() + 120
+    while not (pid2 and watch.execute(blocked, {"p1": pid1, "p2": pid2[0]}).scalar_one()):
+        if time.monotonic() >= deadline:
+            raise AssertionError(failure())
+        threading.Event().wait(0.01)
+
+
 def add_set(svc, obj: str, grip: str, *, ov: int | None = None, gv: int | None = None) -> int:
     """A grasp set stored as the worker stores one (rows, export blob, catalogue refresh), for the given object and
     gripper versions (default: the newest)."""
@@ -58,6 +70,15 @@ def pair(svc, grip: str = "", obj: str = "") -> tuple[str, str]:
     assert svc.gripper(grip).status_code in (200, 201)
     assert svc.upload(obj, box_stl()).status_code in (200, 201)
     return obj, grip
+
+
+def objects_with_a_set(svc, grip: str, prefix: str, n: int) -> dict[str, int]:
+    """`n` new objects for gripper `grip`, each with one grasp set: name -> set id, by name."""
+    ids = {}
+    for name in sorted(slug(prefix) for _ in range(n)):
+        pair(svc, grip, name)
+        ids[name] = add_set(svc, name, grip)
+    return ids
 
 
 def served(svc, obj: str, grip: str) -> tuple[int, int | None, str | None, str | None]:
@@ -182,11 +203,8 @@ def sync(svc, grip: str, since: int | None = None, limit: int = 100) -> tuple[li
 
 def test_fleet_sync_by_change_number_reports_releases_withdrawals_and_dropped_pairs(svc):
     grip = slug("fleet")
-    names = sorted(slug("f") for _ in range(4))
-    ids = {}
-    for n in names:
-        pair(svc, grip, n)
-        ids[n] = add_set(svc, n, grip)
+    ids = objects_with_a_set(svc, grip, "f", 4)
+    names = list(ids)
     full, mark = sync(svc, grip, limit=3)
     assert [i["object"] for i in full] == names and all(i["withdrawn"] is False for i in full)
     assert {i["object"]: i["id"] for i in full} == ids
@@ -244,8 +262,8 @@ def test_fleet_sync_by_change_number_reports_releases_withdrawals_and_dropped_pa
 
 def test_concurrent_catalogue_changes_commit_in_change_order(pg_service):
     """Transaction 1 takes a change number and stays open; transaction 2 (another pair) must wait for it before it
-    can take the next one, so no reader can see number n+1 without n. The wait is observed in pg_stat_activity,
-    not timed."""
+    can take the next one, so no reader can see number n+1 without n. The wait is observed (transaction 1's
+    backend blocks transaction 2's), not timed."""
     svc = pg_service
     grip = slug("conc")
     one, two = slug("c1"), slug("c2")
@@ -258,6 +276,7 @@ def test_concurrent_catalogue_changes_commit_in_change_order(pg_service):
     s1 = db.sessions()
     s1.begin()
     state1, _ = catalogue.release(s1, s1_id, "t1")
+    pid1 = s1.execute(text("SELECT pg_backend_pid()")).scalar_one()
     pid2: list[int] = []
     result2: list = []
 
@@ -270,19 +289,7 @@ def test_concurrent_catalogue_changes_commit_in_change_order(pg_service):
     t.start()
     try:
         with db.engine.connect() as watch:
-            deadline = time.monotonic() + 120  # a condition awaited, not a speed: generous for a loaded machine
-            while time.monotonic() < deadline:
-                waiting = (
-                    pid2
-                    and watch.execute(
-                        text("SELECT wait_event_type FROM pg_stat_activity WHERE pid = :p"), {"p": pid2[0]}
-                    ).scalar_one_or_none()
-                )
-                if waiting == "Lock":
-                    break
-                threading.Event().wait(0.01)
-            else:
-                raise AssertionError("transaction 2 never waited for the change counter")
+            wait_blocked_by(watch, pid1, pid2, lambda: "transaction 2 never waited for the change counter")
         # while 1 is open, a sync sees neither change and its watermark stays below both
         assert sync(svc, grip, since=mark) == ([], mark)
         assert not result2
@@ -324,21 +331,8 @@ def test_a_release_waits_for_a_locked_object_row_before_it_takes_the_counter(pg_
     t.start()
     try:
         with db.engine.connect() as watch:
-            deadline = time.monotonic() + 120  # a condition awaited, not a speed: generous for a loaded machine
-            while time.monotonic() < deadline:
-                # blocked by transaction 1 (the object row); pg_stat_activity's query text is not reliable for
-                # prepared statements, the blocking pids are
-                n = (
-                    pid2
-                    and watch.execute(
-                        text("SELECT :p1 = ANY(pg_blocking_pids(:p2))"), {"p1": pid1, "p2": pid2[0]}
-                    ).scalar_one()
-                )
-                if n:
-                    break
-                threading.Event().wait(0.01)
-            else:
-                raise AssertionError(f"the release never waited for the object row: {result}")
+            # blocked by transaction 1 (the object row)
+            wait_blocked_by(watch, pid1, pid2, lambda: f"the release never waited for the object row: {result}")
             held = watch.execute(
                 text(
                     "SELECT count(*) FROM pg_locks l JOIN pg_class c ON c.oid = l.relation "
@@ -418,11 +412,8 @@ def test_a_robot_syncing_during_concurrent_changes_ends_with_the_catalogue(svc):
 
 def test_a_new_gripper_version_recomputes_every_pair_of_the_gripper(svc):
     grip = slug("gv")
-    names = sorted(slug("p") for _ in range(3))
-    ids = {}
-    for n in names:
-        pair(svc, grip, n)
-        ids[n] = add_set(svc, n, grip)
+    ids = objects_with_a_set(svc, grip, "p", 3)
+    names = list(ids)
     one, two, three = names
     assert svc.post(f"/v1/grasp-sets/{ids[one]}/release").status_code == 200
     _, mark = sync(svc, grip)
