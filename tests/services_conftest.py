@@ -274,6 +274,15 @@ def pg_service(pg_schema, tmp_path_factory) -> Iterator[Service]:
             yield Service(client, settings, tokens)
 
 
+@pytest.fixture
+def pair(pg_service: Service) -> tuple[str, str]:
+    """A new object (a box) and a new gripper on pg_service: (object name, gripper name)."""
+    obj, grip = slug("part"), slug("grip")
+    assert pg_service.upload(obj).status_code == 201
+    assert pg_service.gripper(grip).status_code == 201
+    return obj, grip
+
+
 @pytest.fixture(scope="session")
 def sqlite_service(tmp_path_factory) -> Iterator[Service]:
     """The embedded default: a SQLite file and the in-process worker (jobs really run), with the test tokens."""

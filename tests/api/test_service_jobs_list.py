@@ -14,14 +14,6 @@ from services.common.models import Job
 pytestmark = pytest.mark.integration
 
 
-@pytest.fixture
-def pair(pg_service):
-    obj, grip = slug("part"), slug("grip")
-    assert pg_service.upload(obj).status_code == 201
-    assert pg_service.gripper(grip).status_code == 201
-    return obj, grip
-
-
 def listing(svc, url: str, who: str) -> list[dict]:
     items, nxt = [], url
     for _ in range(100):

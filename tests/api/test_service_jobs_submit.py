@@ -13,14 +13,6 @@ pytestmark = pytest.mark.integration
 PROBLEM = "application/problem+json"
 
 
-@pytest.fixture
-def pair(pg_service):
-    obj, grip = slug("part"), slug("grip")
-    assert pg_service.upload(obj).status_code == 201
-    assert pg_service.gripper(grip).status_code == 201
-    return obj, grip
-
-
 def queued_messages(service) -> int:
     r = redis.Redis.from_url(f"{REDIS_URL}/{redis_db()}")
     try:

@@ -68,14 +68,6 @@ def test_preview_is_in_openapi(pg_service):
     assert {"304", "404", "422"} <= set(op["responses"])
 
 
-@pytest.fixture
-def pair(pg_service):
-    obj, grip = slug("part"), slug("grip")
-    assert pg_service.upload(obj).status_code == 201
-    assert pg_service.gripper(grip).status_code == 201
-    return obj, grip
-
-
 @pytest.mark.parametrize(
     "params",
     [

@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from services_conftest import slug
 from sqlalchemy import func, select, update
 
 from services.common.models import Grasp, GraspSet, Job
@@ -26,14 +25,6 @@ SMALL = {"points": 600, "k1": 4, "k2": 2}
 def runner(pg_service):
     state = pg_service.app.state
     return JobRunner(state.db, state.storage, pg_service.settings)
-
-
-@pytest.fixture
-def pair(pg_service):
-    obj, grip = slug("part"), slug("grip")
-    assert pg_service.upload(obj).status_code == 201
-    assert pg_service.gripper(grip).status_code == 201
-    return obj, grip
 
 
 def submit(svc, obj, grip, params=SMALL, **extra) -> str:
