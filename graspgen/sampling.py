@@ -107,17 +107,6 @@ def morton_order(points: np.ndarray) -> np.ndarray:
     return np.argsort(_morton_code(q), kind="stable").astype(np.int64)
 
 
-def _spread_bits(v: np.ndarray) -> np.ndarray:
-    """Insert two zero bits between each of the low 21 bits of `v` (uint64)."""
-    v = v & np.uint64(0x1FFFFF)
-    v = (v | (v << np.uint64(32))) & np.uint64(0x1F00000000FFFF)
-    v = (v | (v << np.uint64(16))) & np.uint64(0x1F0000FF0000FF)
-    v = (v | (v << np.uint64(8))) & np.uint64(0x100F00F00F00F00F)
-    v = (v | (v << np.uint64(4))) & np.uint64(0x10C30C30C30C30C3)
-    v = (v | (v << np.uint64(2))) & np.uint64(0x1249249249249249)
-    return v
-
-
 def _mesh_candidates(part: Part, m: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, float]:
     mesh = part.mesh
     areas = np.asarray(mesh.area_faces, dtype=np.float64)
@@ -174,13 +163,24 @@ def _eliminate_to(points: np.ndarray, normals: np.ndarray, count: int, area: flo
     return np.sort(order[alive])
 
 
-def _morton_code(q: np.ndarray) -> np.ndarray:
+@numba.njit(cache=True)
+def _morton_code(q):
     """Morton codes (n,) uint64 of non-negative integer coordinates q (n, 3) below 2^21."""
-    return _spread_bits(q[:, 0]) | (_spread_bits(q[:, 1]) << np.uint64(1)) | (_spread_bits(q[:, 2]) << np.uint64(2))
+    out = np.empty(q.shape[0], dtype=np.uint64)
+    for i in range(q.shape[0]):
+        out[i] = _morton1(q[i, 0], q[i, 1], q[i, 2])
+    return out
+
+
+@numba.njit(cache=True)
+def _morton1(x, y, z):
+    """The Morton code (uint64) of one cell (x, y, z): their low 21 bits interleaved, x lowest."""
+    return _spread1(x) | (_spread1(y) << np.uint64(1)) | (_spread1(z) << np.uint64(2))
 
 
 @numba.njit(cache=True)
 def _spread1(v):
+    """Two zero bits inserted between each of the low 21 bits of `v`, as uint64."""
     v = np.uint64(v) & np.uint64(0x1FFFFF)
     v = (v | (v << np.uint64(32))) & np.uint64(0x1F00000000FFFF)
     v = (v | (v << np.uint64(16))) & np.uint64(0x1F0000FF0000FF)
@@ -222,7 +222,7 @@ def _neighbours(points, normals, cells, cell_code, cell_start, cell_end, d_max, 
                     cz = cells[first, 2] + oz
                     if cz < 0:
                         continue
-                    key = _spread1(cx) | (_spread1(cy) << np.uint64(1)) | (_spread1(cz) << np.uint64(2))
+                    key = _morton1(cx, cy, cz)
                     at = np.searchsorted(cell_code, key)
                     if at < cell_code.shape[0] and cell_code[at] == key:
                         r_lo[n_ranges] = cell_start[at]
