@@ -177,6 +177,15 @@ GRIPPER_CASES = [
 ]
 
 
+def _accepts(check, value, refusals) -> bool:  # type: ignore[no-untyped-def]
+    """Whether `check(value)` passes; False when it raises one of `refusals` (anything else is a test error)."""
+    try:
+        check(value)
+    except refusals:
+        return False
+    return True
+
+
 @pytest.mark.parametrize("change", GRIPPER_CASES)
 def test_the_gripper_schema_accepts_what_the_library_accepts(change):
     """The typed schema documents graspgen's own validation: it must not accept or refuse differently."""
@@ -188,16 +197,8 @@ def test_the_gripper_schema_accepts_what_the_library_accepts(change):
     from services.api.contract_schemas import GripperSpec as GripperSpecDoc
 
     spec = {**EXAMPLE_GRIPPER, **change}
-    try:
-        GripperSpec.from_dict(spec)
-        library = True
-    except InvalidGripperError:
-        library = False
-    try:
-        GripperSpecDoc.model_validate(spec, strict=True)
-        documented = True
-    except ValidationError:
-        documented = False
+    library = _accepts(GripperSpec.from_dict, spec, InvalidGripperError)
+    documented = _accepts(lambda s: GripperSpecDoc.model_validate(s, strict=True), spec, ValidationError)
     assert documented == library, spec
 
 
@@ -241,14 +242,6 @@ def test_the_params_schema_accepts_what_the_library_accepts(params):
     from graspgen.params import Params
     from services.api.contract_schemas import JobParams
 
-    try:
-        Params.from_dict(params)
-        library = True
-    except (InvalidParameterError, TypeError):
-        library = False
-    try:
-        JobParams.model_validate(params, strict=True)
-        documented = True
-    except ValidationError:
-        documented = False
+    library = _accepts(Params.from_dict, params, (InvalidParameterError, TypeError))
+    documented = _accepts(lambda p: JobParams.model_validate(p, strict=True), params, ValidationError)
     assert documented == library, params
