@@ -41,12 +41,16 @@ def _check(settings: Settings) -> None:
         db.dispose()
 
 
-def test_upgrade_head_on_empty_postgresql_matches_models_and_downgrades(fresh_pg_schema):
-    _check(Settings(database_url=PG_URL, database_schema=fresh_pg_schema))
+@pytest.fixture(params=["postgresql", "sqlite"])
+def empty_db(request, tmp_path) -> Settings:  # type: ignore[no-untyped-def]
+    """The settings of an empty database: a PostgreSQL schema of its own, or a SQLite file."""
+    if request.param == "postgresql":
+        return Settings(database_url=PG_URL, database_schema=request.getfixturevalue("fresh_pg_schema"))
+    return Settings(storage_dir=tmp_path)
 
 
-def test_upgrade_head_on_empty_sqlite_matches_models_and_downgrades(tmp_path):
-    _check(Settings(storage_dir=tmp_path))
+def test_upgrade_head_on_an_empty_database_matches_models_and_downgrades(empty_db):
+    _check(empty_db)
 
 
 def test_graspgen_migrate_command_upgrades_the_configured_database(fresh_pg_schema, monkeypatch, capsys):
@@ -175,9 +179,5 @@ def _check_data_migration(settings: Settings) -> None:
         db.dispose()
 
 
-def test_0002_fills_the_catalogue_from_existing_sets_and_downgrades_on_postgresql(fresh_pg_schema):
-    _check_data_migration(Settings(database_url=PG_URL, database_schema=fresh_pg_schema))
-
-
-def test_0002_fills_the_catalogue_from_existing_sets_and_downgrades_on_sqlite(tmp_path):
-    _check_data_migration(Settings(storage_dir=tmp_path))
+def test_0002_fills_the_catalogue_from_existing_sets_and_downgrades(empty_db):
+    _check_data_migration(empty_db)
