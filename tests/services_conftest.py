@@ -120,6 +120,17 @@ def pg_schema() -> Iterator[str]:
 
 
 @pytest.fixture
+def settings_from_env() -> Iterator[None]:
+    """services.common.settings.get_settings() reads the environment the test sets (monkeypatch) afresh: its cache is
+    cleared before the test and again after it."""
+    from services.common.settings import get_settings
+
+    get_settings.cache_clear()
+    yield
+    get_settings.cache_clear()
+
+
+@pytest.fixture
 def storage_dir(tmp_path: Path) -> Path:
     d = tmp_path / "var"
     d.mkdir()

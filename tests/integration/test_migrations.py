@@ -53,17 +53,14 @@ def test_upgrade_head_on_an_empty_database_matches_models_and_downgrades(empty_d
     _check(empty_db)
 
 
-def test_graspgen_migrate_command_upgrades_the_configured_database(fresh_pg_schema, monkeypatch, capsys):
+def test_graspgen_migrate_command_upgrades_the_configured_database(
+    fresh_pg_schema, monkeypatch, settings_from_env, capsys
+):
     from services.cli import main
-    from services.common.settings import get_settings
 
     monkeypatch.setenv("GRASPGEN_DATABASE_URL", PG_URL)
     monkeypatch.setenv("GRASPGEN_DATABASE_SCHEMA", fresh_pg_schema)
-    get_settings.cache_clear()
-    try:
-        assert main(["migrate"]) == 0
-    finally:
-        get_settings.cache_clear()
+    assert main(["migrate"]) == 0
     out = capsys.readouterr().out
     assert "is at head" in out and "postgres@" in out
     db = Database(Settings(database_url=PG_URL, database_schema=fresh_pg_schema))

@@ -38,30 +38,18 @@ def test_bad_settings_fail_fast(kwargs):
         Settings(**kwargs)
 
 
-def test_cli_reports_bad_settings_with_exit_2(monkeypatch, capsys):
+def test_cli_reports_bad_settings_with_exit_2(monkeypatch, settings_from_env, capsys):
     monkeypatch.setenv("GRASPGEN_JOB_TIME_LIMIT_S", "1")
-    from services.common.settings import get_settings
-
-    get_settings.cache_clear()
-    try:
-        assert main(["migrate"]) == 2
-    finally:
-        get_settings.cache_clear()
+    assert main(["migrate"]) == 2
     assert "invalid settings" in capsys.readouterr().err
     assert main(["frobnicate"]) == 2
     assert main(["worker", "--concurrency", "x"]) == 2
 
 
-def test_worker_without_broker_is_refused(monkeypatch, tmp_path, capsys):
-    from services.common.settings import get_settings
-
+def test_worker_without_broker_is_refused(monkeypatch, settings_from_env, tmp_path, capsys):
     monkeypatch.setenv("GRASPGEN_STORAGE_DIR", str(tmp_path))
     monkeypatch.delenv("GRASPGEN_BROKER_URL", raising=False)
-    get_settings.cache_clear()
-    try:
-        assert main(["worker"]) == 2
-    finally:
-        get_settings.cache_clear()
+    assert main(["worker"]) == 2
     assert "GRASPGEN_BROKER_URL" in capsys.readouterr().err
 
 
