@@ -17,6 +17,17 @@ SHARED_BAD = Path(__file__).resolve().parents[2].parent / "shared" / "meshes" / 
 GOOD_MESH = CORPUS / "meshes" / "good_box_mm.stl"
 GOOD_GRIPPER = CORPUS / "grippers" / "good.json"
 
+
+def known_pair(service, prefix: str) -> dict[str, str]:  # type: ignore[no-untyped-def]
+    """An object (GOOD_MESH) and a gripper registered on `service` under new names: {"object": ..., "gripper": ...}."""
+    from services_conftest import slug
+
+    names = {"object": slug(f"{prefix}-part"), "gripper": slug(f"{prefix}-grip")}
+    assert service.upload(names["object"], GOOD_MESH.read_bytes()).status_code == 201
+    assert service.gripper(names["gripper"]).status_code == 201
+    return names
+
+
 #: what ../shared/meshes/MANIFEST.md says each file of bad/ is (all in millimetres); a file not listed here must be
 #: rejected or warned about, whatever it is
 SHARED_BAD_EXPECT: dict[str, dict[str, Any]] = {

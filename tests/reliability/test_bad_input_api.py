@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from corpus_cases import GOOD_MESH, code, corpus_params, says
+from corpus_cases import code, corpus_params, known_pair, says
 from services_conftest import GRIPPER, PG_URL, slug
 
 pytestmark = pytest.mark.integration
@@ -25,10 +25,7 @@ def _storage(service) -> set[str]:  # type: ignore[no-untyped-def]
 @pytest.fixture(scope="module")
 def known(pg_service) -> dict[str, str]:
     """An object and a gripper that exist, for the job-parameter entries."""
-    names = {"object": slug("corpus-part"), "gripper": slug("corpus-grip")}
-    assert pg_service.upload(names["object"], GOOD_MESH.read_bytes()).status_code == 201
-    assert pg_service.gripper(names["gripper"]).status_code == 201
-    return names
+    return known_pair(pg_service, "corpus")
 
 
 def _send(service, case: dict[str, Any], known: dict[str, str]):  # type: ignore[no-untyped-def]

@@ -10,7 +10,7 @@ from typing import Any
 
 import anyio
 import pytest
-from corpus_cases import GOOD_MESH
+from corpus_cases import GOOD_MESH, known_pair
 from fastapi.testclient import TestClient
 from services_conftest import GRIPPER, PG_URL, seed_grasp_sets, slug
 
@@ -103,10 +103,7 @@ def test_versions_and_grasp_sets_do_not_cross_objects(pg_service):
 
 @pytest.fixture(scope="module")
 def job_inputs(pg_service) -> dict[str, str]:
-    names = {"object": slug("sec-part"), "gripper": slug("sec-grip")}
-    assert pg_service.upload(names["object"], GOOD_MESH.read_bytes()).status_code == 201
-    assert pg_service.gripper(names["gripper"]).status_code == 201
-    return names
+    return known_pair(pg_service, "sec")
 
 
 def test_another_tokens_job_cannot_be_cancelled_or_replayed(pg_service, job_inputs):
