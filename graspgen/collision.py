@@ -84,7 +84,9 @@ class CollisionModel:
     stroke: float
     min_width: float
     clearance: float
-    palm: tuple[float, float, float, float] | None  # (half x, half y, z_low, z_high)
+    #: the region behind the fingers (half x, half y, z_low, z_high): the palm box, reaching back along the
+    #: approach path when collision_model was given the part's reach; None: no such region
+    palm: tuple[float, float, float, float] | None
     inner_margin: float
 
 

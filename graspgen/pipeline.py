@@ -368,10 +368,10 @@ def _hold_part(run: _Run, loaded: _Loaded, surface: _Surface, survivors: _Surviv
         pts, s = surface.points, survivors
         rho = _hold.torsion_radii(pts, surface.normals, _patch_radius(spec))
         load = _hold.hold_load(loaded.mass_kg, params.accel)
-        hold_args = dict(load=load, grip_force=spec.grip_force, friction=run.mu)
         contacts = np.stack([pts[s.i], pts[s.j]], axis=1)
         radii = np.stack([rho[s.i], rho[s.j]], axis=1)
-        hold_args["normals"] = np.stack([surface.normals[s.i], surface.normals[s.j]], axis=1)
+        normals = np.stack([surface.normals[s.i], surface.normals[s.j]], axis=1)
+        hold_args = dict(normals=normals, load=load, grip_force=spec.grip_force, friction=run.mu)
         margins = _hold.hold_margins(contacts, radii, com, floor=1.0, **hold_args)
         keep = margins >= 1.0
         removed = int(np.sum(~keep))
