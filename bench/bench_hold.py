@@ -29,6 +29,7 @@ The markdown goes between the `bench_hold` markers of `--out` (appended when abs
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import hashlib
 import inspect
 import json
@@ -136,7 +137,9 @@ def run_part(label: str, part, args, members) -> dict:
     spec = GripperSpec.from_dict(gripper)
     row = {"part": label, "gripper": gripper["name"], "configs": {}}
     t0 = time.perf_counter()
-    sim = physics.prepare_part(part.mesh, spec, mass_kg=args.mass, seed=0)
+    # the judge's simulation; --noslip changes only its friction model (the pipeline's own validation keeps the default)
+    judge = dataclasses.replace(physics.SIM, noslip_iterations=args.noslip)
+    sim = physics.prepare_part(part.mesh, spec, mass_kg=args.mass, seed=0, constants=judge)
     row["prepare_s"] = time.perf_counter() - t0
     row["geometry"] = f"{sim.geometry} ({sim.pieces})"
     paper_gs = None
@@ -275,6 +278,7 @@ def markdown(rows, members, args, wall_s) -> str:
         "(e) and MuJoCo validation + repair. Every exported grasp is simulated nominally and under the "
         f"{len(members)} members of `physics.perturbation_set(0)`: nominal = held in the nominal simulation; all = "
         "held under every member; mean = mean share of members held; cov = stats.coverage at 1 cm / 30 deg. "
+        f"Judging simulations with {args.noslip} MuJoCo no-slip iterations (0: MuJoCo's soft friction). "
         f"Machine: {platform.machine()}, {os.cpu_count()} cores shared with other jobs, {args.workers} simulation "
         f"threads, mujoco {__import__('mujoco').__version__}.",
         "",
@@ -405,6 +409,12 @@ def main() -> None:
     ap.add_argument("--k2", type=int, default=2)
     ap.add_argument("--mass", type=float, default=0.2)
     ap.add_argument("--grip-force", type=float, default=20.0)
+    ap.add_argument(
+        "--noslip",
+        type=int,
+        default=physics.SIM.noslip_iterations,
+        help="MuJoCo no-slip iterations of the judging simulations (0: MuJoCo's soft friction, which creeps)",
+    )
     ap.add_argument("--sample", type=int, default=200)
     ap.add_argument("--sample-perturbed", type=int, default=30)
     ap.add_argument("--workers", type=int, default=2)
