@@ -44,7 +44,7 @@ import math
 import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -67,6 +67,8 @@ __all__ = [
     "simulate_grasp",
     "simulate_grasps",
     "simulate_perturbed",
+    "simulate_robust",
+    "validation_set",
     "summarise",
 ]
 
@@ -244,6 +246,43 @@ def perturbation_set(seed: int = 0) -> tuple[Perturbation, ...]:
     return tuple(members)
 
 
+def validation_set(friction: float) -> tuple[Perturbation, ...]:
+    """What `validate` simulates every grasp under: the nominal pick and the two ends of the uncertainty that the
+    hold depends on most, each alone: the part 50 % heavier (mass x1.5) and the pads' friction 20 % lower (x0.8 of
+    the run's `friction`). A validated grasp holds in all three: one simulator setting is not the truth, and a grasp
+    that holds only at the nominal mass and friction is the one that fails on the cell (bench_hold's perturbed
+    failures were almost all under these two)."""
+    return (
+        NOMINAL,
+        Perturbation("mass x1.5", mass_scale=1.5),
+        Perturbation("friction x0.8", friction=0.8 * float(friction)),
+    )
+
+
+def simulate_robust(
+    sim: "SimPart",
+    poses: np.ndarray,
+    widths: np.ndarray,
+    members,
+    *,
+    seed: int = 0,
+    keys: np.ndarray | None = None,
+    workers: int | None = None,
+    inside: np.ndarray | None = None,
+) -> list["SimResult"]:
+    """One outcome per grasp under every member of `members` (validation_set): the first member's (the nominal)
+    result when the grasp holds in all of them, else the result of the first member it fails, named in
+    `SimResult.member`."""
+    members = list(members)
+    names = [p.name for p in members]
+    grid = simulate_perturbed(sim, poses, widths, members, seed=seed, keys=keys, workers=workers, inside=inside)
+    out = []
+    for row in grid:
+        failed = next((j for j, r in enumerate(row) if not r.success), None)
+        out.append(row[0] if failed is None else replace(row[failed], member=names[failed]))
+    return out
+
+
 @dataclass(frozen=True)
 class SimResult:
     """The outcome of one simulated grasp."""
@@ -253,14 +292,19 @@ class SimResult:
     slip_mm: float  # largest displacement of the contact midpoint relative to the fingers after closing
     rotation_deg: float  # largest rotation of the part relative to the fingers after closing
     contacts: int  # part-finger contacts at the end of the closing stage
+    #: the perturbation this outcome was simulated under (validation_set: the first member that failed), or None
+    member: str | None = None
 
     def to_json(self) -> dict[str, Any]:
-        return {
+        out = {
             "success": self.success,
             "reason": self.reason,
             "slip_mm": round(self.slip_mm, 4),
             "rotation_deg": round(self.rotation_deg, 4),
         }
+        if self.member is not None:
+            out["member"] = self.member
+        return out
 
 
 @dataclass

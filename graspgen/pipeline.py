@@ -899,8 +899,9 @@ def _poses(cands: Candidates, idx: np.ndarray) -> np.ndarray:
 
 
 def _validate(cands, labels, selected, clusters, spec, mu, params, extras: _Extras, stats, report):
-    """Simulate the selected grasps; replace each failing one by the first of up to `repair_limit` members of its
-    final cluster (nearest to it first) that succeeds. Returns the new selection and its SimResults."""
+    """Simulate the selected grasps under physics.validation_set (nominal, mass x1.5, friction x0.8): a grasp
+    passes when it holds in all of them. Replace each failing one by the first of up to `repair_limit` members of
+    its final cluster (nearest to it first) that passes. Returns the new selection and its SimResults."""
     from . import physics
 
     report("validate", 0.0)
@@ -911,10 +912,12 @@ def _validate(cands, labels, selected, clusters, spec, mu, params, extras: _Extr
     sim_part = physics.prepare_part(part.surface_mesh(), spec, friction=mu, mass_kg=extras.mass_kg, seed=params.seed)
     report("validate", 0.1)
     widths = cands.widths
-    run = lambda idx: physics.simulate_grasps(  # noqa: E731
+    checks = physics.validation_set(mu)
+    run = lambda idx: physics.simulate_robust(  # noqa: E731
         sim_part,
         _poses(cands, idx),
         widths[idx],
+        checks,
         seed=params.seed,
         keys=idx,
         workers=extras.options.sim_workers,
@@ -958,6 +961,8 @@ def _validate(cands, labels, selected, clusters, spec, mu, params, extras: _Extr
         "repaired": int(np.sum(final != selected)),
         "repair_limit": extras.options.repair_limit,
         "simulated": simulated,
+        "members": [p.name for p in checks],
+        "failed_under": {p.name: sum(r.member == p.name for r in results) for p in checks},
         "mass_kg": extras.mass_kg,
         "grip_force": spec.grip_force,
         "part": part_info,

@@ -82,6 +82,24 @@ def test_low_friction_heavy_part_is_not_held():
     assert r.slip_mm > physics.SIM.slip_limit * 1e3
 
 
+def test_validation_needs_the_grasp_to_hold_under_more_mass_and_less_friction():
+    """A box held across its middle at friction 0.1: 2 x 0.1 x 20 N = 4 N of friction. 0.22 kg needs 3.3 N at the
+    lift and the shake's peak (14.8 m/s^2): held nominally, dropped at mass x1.5 (4.9 N). 0.18 kg holds in all."""
+    box = trimesh.creation.box(extents=(0.04, 0.03, 0.02))
+    T, w = _pose([0, 0, 0], [1, 0, 0])[None], np.array([0.04])
+    members = physics.validation_set(0.1)
+    assert [p.name for p in members] == ["nominal", "mass x1.5", "friction x0.8"]
+    assert members[2].friction == pytest.approx(0.08)
+    heavy = physics.prepare_part(box, SPEC, friction=0.1, mass_kg=0.22)
+    assert physics.simulate_grasps(heavy, T, w)[0].success
+    (r,) = physics.simulate_robust(heavy, T, w, members)
+    assert not r.success and r.member == "mass x1.5" and r.reason == "dropped"
+    assert r.to_json()["member"] == "mass x1.5"
+    light = physics.prepare_part(box, SPEC, friction=0.1, mass_kg=0.18)
+    (r,) = physics.simulate_robust(light, T, w, members)
+    assert r.success and r.member is None and "member" not in r.to_json()
+
+
 def test_deterministic_for_a_seed_and_independent_of_threads(box_sim):
     poses = np.stack([_pose([x, 0, 0], [0, 1, 0]) for x in (-0.01, 0.0, 0.01, 0.015)])
     widths = np.full(4, 0.03)
@@ -133,7 +151,9 @@ def test_generate_validates_every_exported_grasp():
     assert v["part"]["geometry"] == "convex" and v["engine"].startswith("mujoco")
     # the simulation used the job's mass and the gripper's force, not a steel / 20 N guess
     assert v["part"]["mass_kg"] == pytest.approx(0.2) and v["part"]["grip_force_n"] == 20.0
-    assert set(gs.grasps[0]["sim"]) == {"success", "reason", "slip_mm", "rotation_deg"}
+    assert v["members"] == ["nominal", "mass x1.5", "friction x0.8"]
+    assert sum(v["failed_under"].values()) == v["tested"] - v["succeeded"]
+    assert {"success", "reason", "slip_mm", "rotation_deg"} <= set(gs.grasps[0]["sim"])
     assert "validate" in gs.stats["timings_s"]
 
 
@@ -144,7 +164,7 @@ def test_failed_medoids_are_repaired_from_their_own_cluster(monkeypatch):
     medoids = set(plain.candidates.medoids.tolist())
     calls = []
 
-    def fake(sim, poses, widths, *, seed=0, keys=None, workers=None, inside=None):
+    def fake(sim, poses, widths, members, *, seed=0, keys=None, workers=None, inside=None):
         calls.append(list(keys))
         return [
             physics.SimResult(False, "slipped", 9.0, 0.0, 2)
@@ -153,7 +173,7 @@ def test_failed_medoids_are_repaired_from_their_own_cluster(monkeypatch):
             for k in keys
         ]
 
-    monkeypatch.setattr(physics, "simulate_grasps", fake)
+    monkeypatch.setattr(physics, "simulate_robust", fake)
     gs = graspgen.generate(box, GRIPPER, units="m", points=1200, k1=3, k2=2, validate=True, mass_kg=0.2, repair_limit=2)
     v = gs.stats["validation"]
     assert v["first_pass"]["succeeded"] == 0 and v["succeeded"] == 6 and v["repaired"] == 6
@@ -168,10 +188,10 @@ def test_failed_medoids_are_repaired_from_their_own_cluster(monkeypatch):
 def test_repair_gives_up_after_the_limit(monkeypatch):
     box = trimesh.creation.box(extents=(0.04, 0.03, 0.02))
 
-    def fail(sim, poses, widths, *, seed=0, keys=None, workers=None, inside=None):
+    def fail(sim, poses, widths, members, *, seed=0, keys=None, workers=None, inside=None):
         return [physics.SimResult(False, "dropped", 30.0, 0.0, 0) for _ in keys]
 
-    monkeypatch.setattr(physics, "simulate_grasps", fail)
+    monkeypatch.setattr(physics, "simulate_robust", fail)
     gs = graspgen.generate(box, GRIPPER, units="m", points=1200, k1=3, k2=2, validate=True, mass_kg=0.2, repair_limit=3)
     v = gs.stats["validation"]
     assert v["succeeded"] == 0 and v["repaired"] == 0 and v["simulated"] == 6 * 4
