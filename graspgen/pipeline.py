@@ -899,8 +899,8 @@ def _poses(cands: Candidates, idx: np.ndarray) -> np.ndarray:
 
 
 def _validate(cands, labels, selected, clusters, spec, mu, params, extras: _Extras, stats, report):
-    """Simulate the selected grasps under physics.validation_set (nominal, mass x1.5, friction x0.8): a grasp
-    passes when it holds in all of them. Replace each failing one by the first of up to `repair_limit` members of
+    """Simulate the selected grasps under physics.validation_set (nominal, mass x1.5, friction x0.8, soft
+    friction): a grasp passes when it holds in all of them. Replace each failing one by the first of up to `repair_limit` members of
     its final cluster (nearest to it first) that passes. Returns the new selection and its SimResults."""
     from . import physics
 
