@@ -106,5 +106,5 @@ KIND = JobKind(
     request=ClusterJobRequest,
     resolve=resolve,
     run=run,
-    stage_weights={"load": 0.05, "cluster": 0.45, "validate": 0.45, "export": 0.05},
+    stage_weights={"load": 0.04, "cluster": 0.16, "validate": 0.76, "export": 0.04},
 )

@@ -128,15 +128,16 @@ KIND = JobKind(
     request=GenerateJobRequest,
     resolve=resolve,
     run=run,
-    # "validate" (MuJoCo simulation of the exported grasps) counts only with params.validate
+    # "validate" (MuJoCo simulation of the exported grasps, four simulations each: physics.validation_set) counts
+    # only with params.validate; it then takes most of a job's time
     stage_weights={
-        "load": 0.02,
-        "sample": 0.06,
-        "pairs": 0.26,
-        "collision": 0.30,
-        "cluster": 0.08,
-        "validate": 0.24,
-        "export": 0.04,
+        "load": 0.01,
+        "sample": 0.03,
+        "pairs": 0.12,
+        "collision": 0.14,
+        "cluster": 0.04,
+        "validate": 0.64,
+        "export": 0.02,
     },
     checks_memory=True,
 )
