@@ -10,11 +10,20 @@ answer.
   tests of triangle against box).
 
 The tree: a binary tree over triangle centroids, split at the median of the longest axis, at most `_LEAF`
-triangles per leaf; per node an axis-aligned box and a ball (centre, radius) around its triangles. A query walks
-the tree once per candidate and carries the set of rolls still free: a node is entered only at the rolls at which
-it may meet a box (its ball against the region's x range and radial band around the closing axis, then its box
-against the region's box by separating axes); a triangle is tested at the rolls its node met, when its extent
-along the closing axis meets the region's.
+triangles per leaf; per node an axis-aligned box, a ball (centre, radius) and an oriented box (principal axes)
+around its triangles. A query walks the tree once per candidate and carries, per region (the two fingers and
+the palm with its approach), the set of rolls still to test there. At a node, per region: the node's x range
+along the closing axis (the tightest of its two boxes and its ball: the oriented box hugs the long thin
+triangles of a curved wall, whose axis-aligned box sticks out far beyond the wall) against the region's, and its
+ball against the region's radial band around the axis, for all rolls at once; then per roll (the palm at every
+node, the fingers at the leaves: their boxes are small, and above the leaves the per-roll tests pruned little
+and cost more) the node's axis-aligned box by separating axes against the region's box cut to the node's slab
+along the closing axis, where all its triangles lie (cut, the palm, a stroke wide, and its approach, a part long,
+miss most nodes: on the thick ring the palm's triangle tests went from 277 to 2 per candidate). A triangle is
+tested at the rolls its node met for that region, when its extent along the closing axis meets the region's.
+Every node test only prunes, with a guard band (1e-9 of the part's size) far beyond rounding; the answer is the
+triangle test's, so the masks are those of testing every triangle at every roll (tests/graspgen/test_kernels.py
+checks that by brute force).
 
 Tried and not kept (bench/bench_criteria.py, thick ring and tless_04 at 10,000 points): certifying most rolls with
 the point kernel and boxes grown by the sample's covering radius, testing triangles only where that failed (same
@@ -37,6 +46,7 @@ from .collision import CollisionModel, _basis, _regions, _x_ranges
 __all__ = ["MeshTree", "build_tree", "normal_spread_rad", "mesh_free_rolls"]
 
 _LEAF = 4
+_NODE = 23  # floats per tree node: see _build
 _CHUNK = 256  # candidates per unit of parallel work
 
 
@@ -66,7 +76,7 @@ def build_tree(vertices: np.ndarray, faces: np.ndarray) -> MeshTree:
     m = len(tri)
     max_nodes = 2 * m + 1
     order = np.arange(m, dtype=np.int64)
-    nodes = np.zeros((max_nodes, 8), dtype=np.float64)  # see _build
+    nodes = np.zeros((max_nodes, _NODE), dtype=np.float64)  # see _build
     children = np.zeros((max_nodes, 4), dtype=np.int64)  # left, right, start, count
     count = _build(np.ascontiguousarray(tri), order, nodes, children) if m else 0
     tri = np.ascontiguousarray(tri[order])
@@ -76,8 +86,11 @@ def build_tree(vertices: np.ndarray, faces: np.ndarray) -> MeshTree:
 
 @njit(cache=True)
 def _build(T, order, nodes, children):
-    """Fill nodes[k] = (centre x, y, z, ball radius, half extents x, y, z of the box, unused) and
-    children[k] = (left, right, start, count); leaves have left = -1. Returns the node count."""
+    """Fill nodes[k] (_NODE floats) = (centre x, y, z of the axis-aligned box, radius of the ball around that
+    centre, the box's half extents x, y, z, unused, then the oriented box of the node's vertices: centre xyz,
+    three unit axes as rows (principal first), half extents) and children[k] = (left, right, start, count);
+    leaves have left = -1. Returns the node count. The oriented box suits the long thin triangles of curved
+    walls (an arc's axis-aligned box sticks out far beyond it); its bounds are not padded: the queries pad."""
     m = T.shape[0]
     cen = np.empty((m, 3))
     for t in range(m):
@@ -114,6 +127,7 @@ def _build(T, order, nodes, children):
         nodes[k, 0], nodes[k, 1], nodes[k, 2] = c[0], c[1], c[2]
         nodes[k, 3] = np.sqrt(r2) * (1.0 + 1e-12) + 1e-15
         nodes[k, 4], nodes[k, 5], nodes[k, 6] = 0.5 * (hi[0] - lo[0]), 0.5 * (hi[1] - lo[1]), 0.5 * (hi[2] - lo[2])
+        _oriented_box(T, order, a0, b0, nodes[k])
         children[k, 2], children[k, 3] = a0, b0 - a0
         if b0 - a0 <= _LEAF:
             children[k, 0], children[k, 1] = -1, -1
@@ -135,6 +149,45 @@ def _build(T, order, nodes, children):
         stack[top + 1, 0], stack[top + 1, 1], stack[top + 1, 2] = right, mid, b0
         top += 2
     return count
+
+
+@njit(cache=True)
+def _oriented_box(T, order, a0, b0, out):
+    """The oriented box of the vertices of triangles T[order[a0:b0]] into out[8:23] (see _build): axes by
+    principal components, bounds by projection."""
+    cnt = 3 * (b0 - a0)
+    mean = np.zeros(3)
+    for q in range(a0, b0):
+        for v in range(3):
+            for a in range(3):
+                mean[a] += T[order[q], v, a]
+    mean /= cnt
+    cov = np.zeros((3, 3))
+    for q in range(a0, b0):
+        for v in range(3):
+            for a in range(3):
+                for b in range(3):
+                    cov[a, b] += (T[order[q], v, a] - mean[a]) * (T[order[q], v, b] - mean[b])
+    _, V = np.linalg.eigh(cov)
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for q in range(a0, b0):
+        for v in range(3):
+            for i in range(3):
+                pr = 0.0
+                for a in range(3):
+                    pr += (T[order[q], v, a] - mean[a]) * V[a, 2 - i]
+                lo[i] = min(lo[i], pr)
+                hi[i] = max(hi[i], pr)
+    for a in range(3):
+        c = mean[a]
+        for i in range(3):
+            c += V[a, 2 - i] * 0.5 * (lo[i] + hi[i])
+        out[8 + a] = c
+    for i in range(3):
+        for a in range(3):
+            out[11 + 3 * i + a] = V[a, 2 - i]
+        out[20 + i] = 0.5 * (hi[i] - lo[i])
 
 
 # -- normals within a distance -------------------------------------------------------------------------------------
@@ -302,6 +355,8 @@ def mesh_free_rolls(
     reg = _regions(model)
     model_f = np.array([model.finger_thickness, model.stroke, model.min_width, model.clearance, model.inner_margin])
     psi = 2.0 * np.pi * np.arange(R) / R
+    # the node tests' guard band: far beyond the rounding of the boxes' bounds and of the tests themselves
+    guard = 1e-9 * 2.0 * float(np.max(tree.nodes[0, 4:7])) + 1e-15
     _mesh_kernel(
         np.ascontiguousarray(midpoints, dtype=np.float64),
         np.ascontiguousarray(axes, dtype=np.float64),
@@ -316,40 +371,176 @@ def mesh_free_rolls(
         np.cos(psi),
         np.sin(psi),
         float(switch),
+        guard,
     )
     return out
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _node_meets_box(nodes, k, x, y0, z0, ax, ay, az, rot, rl, c, s, bc, be):
-    """May node k's axis-aligned box meet the region box (centre bc, half extents be in the grasp frame of roll rl,
-    whose Y and Z in the object frame are rot[rl])? Separating-axis test on the region's three axes and the
-    world's three (the nine cross axes are left out: a node that passes is only descended into)."""
+def _node_meets_box(nodes, k, x, y0, z0, ax, ay, az, rot, rl, c, s, bcx, bex, bcy, bey, bcz, bez, g):
+    """May node k's axis-aligned box meet the region box at roll rl? The region box: centre (bcx, bcy, bcz) and
+    half extents (bex, bey, bez) in the grasp frame of roll rl, whose Y and Z in the object frame are
+    rot[rl]; the node's centre in the roll-0 frame is (x, y0, z0). Separating-axis test on the region's Y and Z
+    and the world's three axes, each with the guard band g (the caller has tested X; the nine cross axes are
+    left out: a node that passes is only descended into)."""
     ex, ey, ez = nodes[k, 4], nodes[k, 5], nodes[k, 6]
     Yx, Yy, Yz, Zx, Zy, Zz = rot[rl, 0], rot[rl, 1], rot[rl, 2], rot[rl, 3], rot[rl, 4], rot[rl, 5]
     # the node's centre relative to the region's centre, along the region's axes
-    dX = x - bc[0]
-    dY = y0 * c + z0 * s - bc[1]
-    dZ = -y0 * s + z0 * c - bc[2]
-    if abs(dX) > be[0] + ex * abs(ax) + ey * abs(ay) + ez * abs(az):
+    dX = x - bcx
+    dY = y0 * c + z0 * s - bcy
+    dZ = -y0 * s + z0 * c - bcz
+    if abs(dY) > bey + ex * abs(Yx) + ey * abs(Yy) + ez * abs(Yz) + g:
         return False
-    if abs(dY) > be[1] + ex * abs(Yx) + ey * abs(Yy) + ez * abs(Yz):
-        return False
-    if abs(dZ) > be[2] + ex * abs(Zx) + ey * abs(Zy) + ez * abs(Zz):
+    if abs(dZ) > bez + ex * abs(Zx) + ey * abs(Zy) + ez * abs(Zz) + g:
         return False
     # along the world's axes: the offset in the object frame
     wx = dX * ax + dY * Yx + dZ * Zx
     wy = dX * ay + dY * Yy + dZ * Zy
     wz = dX * az + dY * Yz + dZ * Zz
-    if abs(wx) > ex + be[0] * abs(ax) + be[1] * abs(Yx) + be[2] * abs(Zx):
+    if abs(wx) > ex + bex * abs(ax) + bey * abs(Yx) + bez * abs(Zx) + g:
         return False
-    if abs(wy) > ey + be[0] * abs(ay) + be[1] * abs(Yy) + be[2] * abs(Zy):
+    if abs(wy) > ey + bex * abs(ay) + bey * abs(Yy) + bez * abs(Zy) + g:
         return False
-    return abs(wz) <= ez + be[0] * abs(az) + be[1] * abs(Yz) + be[2] * abs(Zz)
+    return abs(wz) <= ez + bex * abs(az) + bey * abs(Yz) + bez * abs(Zz) + g
+
+
+@njit(cache=True, error_model="numpy")
+def _walk(F, todo, T, nodes, children, reg, rx, boxes_c, boxes_e, rot, cos_k, sin_k, g, scratch, stack, masks, hit):
+    """The rolls of `todo` at which some triangle meets some region box, for the candidate with midpoint F[0:3]
+    and roll-0 frame X, Y0, Z0 = F[3:6], F[6:9], F[9:12]: one walk of the tree carrying, per region, the rolls
+    still to test. Its own function, called from the parallel loop: inlined in the loop's body, the same code
+    ran 2x slower."""
+    R = cos_k.shape[0]
+    nreg = reg.shape[0]
+    mx, my, mz = F[0], F[1], F[2]
+    ax, ay, az, yx, yy, yz, zx, zy, zz = F[3], F[4], F[5], F[6], F[7], F[8], F[9], F[10], F[11]
+    v = scratch[0]
+    w = scratch[1]
+    blocked = np.uint64(0)
+    stack[0] = 0
+    for r in range(nreg):
+        masks[0, r] = todo
+    top = 1
+    while top > 0:
+        top -= 1
+        k = stack[top]
+        live_any = np.uint64(0)
+        for r in range(nreg):
+            live_any |= masks[top, r]
+        if live_any & ~blocked == 0:
+            continue
+        # the node's x range along the closing axis (the tighter of its two boxes and its ball), its
+        # centre's distance from the axis, in the roll-0 frame
+        qx = nodes[k, 0] - mx
+        qy = nodes[k, 1] - my
+        qz = nodes[k, 2] - mz
+        x = qx * ax + qy * ay + qz * az
+        y0 = qx * yx + qy * yy + qz * yz
+        z0 = qx * zx + qy * zy + qz * zz
+        rad = nodes[k, 3]
+        rc = np.sqrt(y0 * y0 + z0 * z0)
+        xh = min(nodes[k, 4] * abs(ax) + nodes[k, 5] * abs(ay) + nodes[k, 6] * abs(az), rad)
+        ox = (nodes[k, 8] - mx) * ax + (nodes[k, 9] - my) * ay + (nodes[k, 10] - mz) * az
+        oh = (
+            nodes[k, 20] * abs(nodes[k, 11] * ax + nodes[k, 12] * ay + nodes[k, 13] * az)
+            + nodes[k, 21] * abs(nodes[k, 14] * ax + nodes[k, 15] * ay + nodes[k, 16] * az)
+            + nodes[k, 22] * abs(nodes[k, 17] * ax + nodes[k, 18] * ay + nodes[k, 19] * az)
+        )
+        x_lo = max(x - xh, ox - oh) - g
+        x_hi = min(x + xh, ox + oh) + g
+        inner = children[k, 0] >= 0
+        any_hit = np.uint64(0)
+        for r in range(nreg):
+            hit[r] = 0
+            live = masks[top, r] & ~blocked
+            if live == 0:
+                continue
+            # roll-free tests first: the region's x range and its radial band around the axis
+            lo, hi = max(rx[r, 0], x_lo), min(rx[r, 1], x_hi)
+            if lo > hi:
+                continue
+            if rc + rad < reg[r, 3] or rc - rad > reg[r, 4]:
+                continue
+            if r < 2 and inner:
+                # the fingers' boxes are small: their per-roll tests prune little above the leaves
+                hit[r] = live
+                any_hit |= live
+                continue
+            # per roll: the region cut to the node's slab along X, where all its triangles lie (the
+            # palm is a stroke wide and its approach a part long: cut, it misses most nodes)
+            bcx, bex = 0.5 * (lo + hi), 0.5 * (hi - lo)
+            bcy, bey, bcz, bez = boxes_c[r, 1], boxes_e[r, 1], boxes_c[r, 2], boxes_e[r, 2]
+            h = np.uint64(0)
+            for rl in range(R):
+                bit = np.uint64(1) << np.uint64(rl)
+                if not (live & bit):
+                    continue
+                if _node_meets_box(
+                    nodes,
+                    k,
+                    x,
+                    y0,
+                    z0,
+                    ax,
+                    ay,
+                    az,
+                    rot,
+                    rl,
+                    cos_k[rl],
+                    sin_k[rl],
+                    bcx,
+                    bex,
+                    bcy,
+                    bey,
+                    bcz,
+                    bez,
+                    g,
+                ):
+                    h |= bit
+            hit[r] = h
+            any_hit |= h
+        if any_hit == 0:
+            continue
+        if inner:
+            stack[top] = children[k, 0]
+            stack[top + 1] = children[k, 1]
+            for r in range(nreg):
+                masks[top, r] = hit[r]
+                masks[top + 1, r] = hit[r]
+            top += 2
+            continue
+        for t in range(children[k, 2], children[k, 2] + children[k, 3]):
+            # the triangle in the roll-0 frame
+            for c in range(3):
+                px = T[t, c, 0] - mx
+                py = T[t, c, 1] - my
+                pz = T[t, c, 2] - mz
+                v[c, 0] = px * ax + py * ay + pz * az
+                v[c, 1] = px * yx + py * yy + pz * yz
+                v[c, 2] = px * zx + py * zy + pz * zz
+            tx0 = min(v[0, 0], v[1, 0], v[2, 0])
+            tx1 = max(v[0, 0], v[1, 0], v[2, 0])
+            for r in range(nreg):
+                if tx1 < rx[r, 0] or tx0 > rx[r, 1]:
+                    continue
+                for rl in range(R):
+                    bit = np.uint64(1) << np.uint64(rl)
+                    if not (hit[r] & bit & ~blocked):
+                        continue
+                    ck, sk = cos_k[rl], sin_k[rl]
+                    for c in range(3):
+                        w[c, 0] = v[c, 0]
+                        w[c, 1] = v[c, 1] * ck + v[c, 2] * sk
+                        w[c, 2] = -v[c, 1] * sk + v[c, 2] * ck
+                    if _tri_box(w, boxes_c[r], boxes_e[r]):
+                        blocked |= bit
+        if blocked == todo:
+            break
+    return blocked
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _mesh_kernel(M, A, Wd, inside, free, T, nodes, children, reg, model_f, cos_k, sin_k, switch):
+def _mesh_kernel(M, A, Wd, inside, free, T, nodes, children, reg, model_f, cos_k, sin_k, switch, g):
     n = M.shape[0]
     R = cos_k.shape[0]
     nreg = reg.shape[0]
@@ -359,11 +550,12 @@ def _mesh_kernel(M, A, Wd, inside, free, T, nodes, children, reg, model_f, cos_k
         rx = np.empty((3, 2))
         boxes_c = np.empty((3, 3))
         boxes_e = np.empty((3, 3))
-        v = np.empty((3, 3))
-        w = np.empty((3, 3))
+        scratch = np.empty((2, 3, 3))  # a triangle in the roll-0 frame and at a roll
+        F = np.empty(12)
         rot = np.empty((R, 6))
         stack = np.empty(128, dtype=np.int64)
-        masks = np.empty(128, dtype=np.uint64)
+        masks = np.empty((128, 3), dtype=np.uint64)  # per stack entry and region: the rolls to test
+        hit = np.empty(3, dtype=np.uint64)
         for i in range(ch * _CHUNK, min(n, (ch + 1) * _CHUNK)):
             todo = np.uint64(0)
             for k in range(R):
@@ -391,78 +583,11 @@ def _mesh_kernel(M, A, Wd, inside, free, T, nodes, children, reg, model_f, cos_k
                 boxes_e[r, 1] = reg[r, 0]
                 boxes_c[r, 2] = 0.5 * (reg[r, 1] + reg[r, 2])
                 boxes_e[r, 2] = 0.5 * (reg[r, 2] - reg[r, 1])
-            blocked = np.uint64(0)
-            stack[0] = 0
-            masks[0] = todo
-            top = 1
-            while top > 0:
-                top -= 1
-                k = stack[top]
-                live = masks[top] & ~blocked
-                if live == 0:
-                    continue
-                # the node's ball in the roll-0 frame: its x range, radial range and angular interval
-                qx = nodes[k, 0] - M[i, 0]
-                qy = nodes[k, 1] - M[i, 1]
-                qz = nodes[k, 2] - M[i, 2]
-                x = qx * ax + qy * ay + qz * az
-                y0 = qx * yx + qy * yy + qz * yz
-                z0 = qx * zx + qy * zy + qz * zz
-                rad = nodes[k, 3]
-                rc = np.sqrt(y0 * y0 + z0 * z0)
-                hit = np.uint64(0)
-                for r in range(nreg):
-                    # roll-free tests first: the region's x range and its radial band around the axis
-                    if x + rad < rx[r, 0] or x - rad > rx[r, 1]:
-                        continue
-                    if rc + rad < reg[r, 3] or rc - rad > reg[r, 4]:
-                        continue
-                    for rl in range(R):
-                        bit = np.uint64(1) << np.uint64(rl)
-                        if not (live & bit & ~hit):
-                            continue
-                        if _node_meets_box(
-                            nodes, k, x, y0, z0, ax, ay, az, rot, rl, cos_k[rl], sin_k[rl], boxes_c[r], boxes_e[r]
-                        ):
-                            hit |= bit
-                    if hit == live:
-                        break
-                if hit == 0:
-                    continue
-                if children[k, 0] >= 0:
-                    stack[top] = children[k, 0]
-                    masks[top] = hit
-                    stack[top + 1] = children[k, 1]
-                    masks[top + 1] = hit
-                    top += 2
-                    continue
-                for t in range(children[k, 2], children[k, 2] + children[k, 3]):
-                    # the triangle in the roll-0 frame
-                    for c in range(3):
-                        px = T[t, c, 0] - M[i, 0]
-                        py = T[t, c, 1] - M[i, 1]
-                        pz = T[t, c, 2] - M[i, 2]
-                        v[c, 0] = px * ax + py * ay + pz * az
-                        v[c, 1] = px * yx + py * yy + pz * yz
-                        v[c, 2] = px * zx + py * zy + pz * zz
-                    tx0 = min(v[0, 0], v[1, 0], v[2, 0])
-                    tx1 = max(v[0, 0], v[1, 0], v[2, 0])
-                    for r in range(nreg):
-                        if tx1 < rx[r, 0] or tx0 > rx[r, 1]:
-                            continue
-                        for rl in range(R):
-                            bit = np.uint64(1) << np.uint64(rl)
-                            if not (hit & bit & ~blocked):
-                                continue
-                            ck, sk = cos_k[rl], sin_k[rl]
-                            for c in range(3):
-                                w[c, 0] = v[c, 0]
-                                w[c, 1] = v[c, 1] * ck + v[c, 2] * sk
-                                w[c, 2] = -v[c, 1] * sk + v[c, 2] * ck
-                            if _tri_box(w, boxes_c[r], boxes_e[r]):
-                                blocked |= bit
-                if blocked == todo:
-                    break
+            F[0], F[1], F[2] = M[i, 0], M[i, 1], M[i, 2]
+            F[3], F[4], F[5], F[6], F[7], F[8], F[9], F[10], F[11] = ax, ay, az, yx, yy, yz, zx, zy, zz
+            blocked = _walk(
+                F, todo, T, nodes, children, reg, rx, boxes_c, boxes_e, rot, cos_k, sin_k, g, scratch, stack, masks, hit
+            )
             if blocked != 0:
                 for rl in range(R):
                     if blocked & (np.uint64(1) << np.uint64(rl)):

@@ -403,3 +403,95 @@ def test_free_rolls_refuses_bad_normals():
     bad[3, 1] = np.nan
     with pytest.raises(ValueError, match="finite"):
         free_rolls_of_pairs(pts, i, j, inside, model, 16, normals=bad)
+
+
+def _mesh_free_rolls_brute(tree, mids, axes, widths, inside, model, rolls):
+    """mesh_free_rolls without its tree: every triangle against every region box at every roll, by the kernel's
+    own arithmetic (the roll-0 frame, the rotation per roll, the separating-axis test)."""
+    from numba import njit
+
+    from graspgen.collision import _basis, _regions, _x_ranges
+    from graspgen.meshtree import _tri_box
+    from graspgen.transforms import ROLL_REFERENCE_SWITCH
+
+    @njit(cache=False)
+    def brute(M, A, Wd, ins, T, reg, model_f, cos_k, sin_k, switch, out):
+        R = cos_k.shape[0]
+        xr = np.empty((3, 2))
+        bc = np.empty(3)
+        be = np.empty(3)
+        v = np.empty((3, 3))
+        w = np.empty((3, 3))
+        for i in range(M.shape[0]):
+            ax, ay, az = A[i, 0], A[i, 1], A[i, 2]
+            yx, yy, yz, zx, zy, zz = _basis(ax, ay, az, switch)
+            _x_ranges(xr, ins[i], Wd[i], model_f)
+            for r in range(reg.shape[0]):
+                lo_x, hi_x = (xr[r, 0], xr[r, 1]) if r < 2 else (-reg[r, 10], reg[r, 10])
+                bc[0], be[0] = 0.5 * (lo_x + hi_x), 0.5 * (hi_x - lo_x)
+                bc[1], be[1] = 0.0, reg[r, 0]
+                bc[2], be[2] = 0.5 * (reg[r, 1] + reg[r, 2]), 0.5 * (reg[r, 2] - reg[r, 1])
+                for t in range(T.shape[0]):
+                    for c in range(3):
+                        px, py, pz = T[t, c, 0] - M[i, 0], T[t, c, 1] - M[i, 1], T[t, c, 2] - M[i, 2]
+                        v[c, 0] = px * ax + py * ay + pz * az
+                        v[c, 1] = px * yx + py * yy + pz * yz
+                        v[c, 2] = px * zx + py * zy + pz * zz
+                    for rl in range(R):
+                        ck, sk = cos_k[rl], sin_k[rl]
+                        for c in range(3):
+                            w[c, 0] = v[c, 0]
+                            w[c, 1] = v[c, 1] * ck + v[c, 2] * sk
+                            w[c, 2] = -v[c, 1] * sk + v[c, 2] * ck
+                        if _tri_box(w, bc, be):
+                            out[i, rl] = False
+
+    out = np.ones((len(mids), rolls), dtype=bool)
+    psi = 2.0 * np.pi * np.arange(rolls) / rolls
+    model_f = np.array([model.finger_thickness, model.stroke, model.min_width, model.clearance, model.inner_margin])
+    brute(
+        mids,
+        axes,
+        widths,
+        inside,
+        tree.triangles,
+        _regions(model),
+        model_f,
+        np.cos(psi),
+        np.sin(psi),
+        ROLL_REFERENCE_SWITCH,
+        out,
+    )
+    return out
+
+
+@pytest.mark.parametrize("name", ["ring", "u", "cylinder", "box"])
+def test_mesh_free_rolls_equal_brute_force(name):
+    """The mesh-exact check's tree walk (its node tests and their cuts only prune) gives what testing every
+    triangle at every roll gives, with and without the approach region, outside and inside grasps, with every
+    roll to test and with random subsets."""
+    from graspgen.collision import approach_reach
+    from graspgen.meshtree import build_tree, mesh_free_rolls
+
+    mesh = _parts()[name]
+    pts, nrm = _sample(mesh, 700, seed=3)
+    tree = build_tree(mesh.vertices, mesh.faces)
+    rng = np.random.default_rng(5)
+    for inside in (False, True):
+        mids, axes, w, ins = _candidates(pts, nrm, inside=inside)
+        if not len(mids):
+            continue
+        sel = rng.choice(len(mids), min(150, len(mids)), replace=False)
+        mids, axes, w, ins = mids[sel], axes[sel], w[sel], ins[sel]
+        for model in (
+            collision_model(GRIPPER, "paper"),
+            collision_model(GRIPPER, "swept"),
+            collision_model(GRIPPER, "swept", reach=approach_reach(pts)),
+        ):
+            expect = _mesh_free_rolls_brute(tree, mids, axes, w, ins, model, 16)
+            every = np.ones((len(mids), 16), dtype=bool)
+            np.testing.assert_array_equal(mesh_free_rolls(tree, mids, axes, w, ins, every, model), expect)
+            some = rng.random((len(mids), 16)) < 0.4
+            np.testing.assert_array_equal(mesh_free_rolls(tree, mids, axes, w, ins, some, model), expect & some)
+            if not inside:
+                assert expect.any() and not expect.all()
