@@ -40,9 +40,11 @@ simulation; `perturbation_set(seed)` is the standard set the quality benchmark c
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 import threading
+from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
@@ -377,8 +379,32 @@ class SimPart:
 # model
 
 
+#: decompositions kept per process (CoACD takes seconds to a minute a part; a worker validates the same object for
+#: several grippers and jobs): key -> (pieces, method, note), the pieces read-only
+_DECOMPOSITIONS: OrderedDict = OrderedDict()
+_DECOMPOSITIONS_KEPT = 8
+_DECOMPOSITIONS_LOCK = threading.Lock()
+
+
 def _decompose(mesh: trimesh.Trimesh, c: SimConstants, seed: int) -> tuple[list[trimesh.Trimesh], str, str | None]:
-    """Convex pieces of the part, the method used and a note when it fell back."""
+    """Convex pieces of the part, the method used and a note when it fell back; the last few are remembered, keyed
+    by the mesh's bytes, CoACD's settings and the seed."""
+    h = hashlib.sha1(np.ascontiguousarray(mesh.vertices, dtype=np.float64).tobytes())
+    h.update(np.ascontiguousarray(mesh.faces, dtype=np.int64).tobytes())
+    key = (h.hexdigest(), c.coacd_threshold, c.coacd_max_hulls, c.coacd_options, int(seed))
+    with _DECOMPOSITIONS_LOCK:
+        if key in _DECOMPOSITIONS:
+            _DECOMPOSITIONS.move_to_end(key)
+            return _DECOMPOSITIONS[key]
+    out = _decompose_once(mesh, c, seed)
+    with _DECOMPOSITIONS_LOCK:
+        _DECOMPOSITIONS[key] = out
+        while len(_DECOMPOSITIONS) > _DECOMPOSITIONS_KEPT:
+            _DECOMPOSITIONS.popitem(last=False)
+    return out
+
+
+def _decompose_once(mesh: trimesh.Trimesh, c: SimConstants, seed: int) -> tuple[list[trimesh.Trimesh], str, str | None]:
     if mesh.is_convex:
         return [mesh.convex_hull], "convex", None
     try:

@@ -485,3 +485,26 @@ def test_an_approach_into_a_convex_piece_but_not_into_the_part_is_no_collision(m
     assert free.reason != "collision"
     blocked = physics.simulate_grasp(physics.prepare_part(channel(-0.025, 0.025, -0.006), SPEC, mass_kg=0.1), T, 0.01)
     assert blocked.reason == "collision"
+
+
+def test_a_decomposition_is_made_once_per_mesh_and_setting(monkeypatch):
+    """CoACD takes up to a minute a part: a worker validating one object for several jobs decomposes it once."""
+    import dataclasses
+
+    calls = []
+    real = physics._decompose_once
+
+    def counting(mesh, c, seed):
+        calls.append(c.coacd_threshold)
+        return real(mesh, c, seed)
+
+    monkeypatch.setattr(physics, "_decompose_once", counting)
+    monkeypatch.setattr(physics, "_DECOMPOSITIONS", type(physics._DECOMPOSITIONS)())
+    ring = trimesh.creation.annulus(r_min=0.010, r_max=0.030, height=0.020, sections=32)
+    a = physics.prepare_part(ring, SPEC, mass_kg=0.1)
+    b = physics.prepare_part(ring.copy(), SPEC, mass_kg=0.3)  # the same geometry: remembered
+    assert len(calls) == 1 and a.pieces == b.pieces and a.geometry == b.geometry == "coacd"
+    coarse = dataclasses.replace(physics.SIM, coacd_threshold=0.2)
+    physics.prepare_part(ring, SPEC, mass_kg=0.1, constants=coarse)  # another setting: decomposed again
+    physics.prepare_part(ring.apply_translation([0.001, 0, 0]), SPEC, mass_kg=0.1)  # another mesh: again
+    assert len(calls) == 3
