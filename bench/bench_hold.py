@@ -263,10 +263,21 @@ def pct(a, b):
     return "-" if not b else f"{100.0 * a / b:.1f} %"
 
 
+def _run_arguments() -> list[str]:
+    """This run's command-line arguments for the text, without where it wrote (--out, --json)."""
+    out, skip = [], False
+    for a in sys.argv[1:]:
+        if skip:
+            skip = False
+        elif a in ("--out", "--json"):
+            skip = True
+        elif not a.startswith(("--out=", "--json=")):
+            out.append(a)
+    return out
+
+
 def markdown(rows, members, args, wall_s) -> str:
-    cmd = args.command or "PYTHONUNBUFFERED=1 .venv/bin/python bench/bench_hold.py" + (
-        f" --parts {' '.join(args.parts)}" if args.parts else ""
-    )
+    cmd = args.command or " ".join(["PYTHONUNBUFFERED=1 .venv/bin/python bench/bench_hold.py", *_run_arguments()])
     lines = [
         START,
         "## Criterion (e) and perturbed validation (issue 14)",
