@@ -141,7 +141,9 @@ class QualityOptions:
         choices=SELECT_MODES,
     )
     validate: bool = _option(
-        False, "simulate every exported grasp in MuJoCo (needs the part's mass and the gripper's grip_force)"
+        False,
+        "simulate every exported grasp in MuJoCo, nominally and at mass x1.5, friction x0.8 and soft friction, "
+        "and repair failures (needs the part's mass and the gripper's grip_force)",
     )
     repair_limit: int = 4
     sim_workers: int | None = None

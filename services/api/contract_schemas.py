@@ -106,7 +106,10 @@ class JobParams(BaseModel):
     )
     select: Literal["medoid", "best-near-medoid"] | None = Field(None, description="docs/QUALITY.md")
     validate_: bool | None = Field(
-        None, alias="validate", description="simulate every exported grasp in MuJoCo and repair failures"
+        None,
+        alias="validate",
+        description="simulate every exported grasp in MuJoCo (nominal, mass x1.5, friction x0.8, soft friction: "
+        "it must hold in all four) and repair failures",
     )
 
 

@@ -50,7 +50,8 @@ class GenerateJobRequest(NoNulModel):
     params: Annotated[dict[str, Any] | None, PARAMS_DOC] = Field(
         None,
         description="any of points, friction, safety_factor, rolls, k1, k2, inside, collision, seed; validate (bool, "
-        "simulate every exported grasp in MuJoCo and repair failures), select ('medoid' | 'best-near-medoid'), "
+        "simulate every exported grasp in MuJoCo under four settings and repair failures), "
+        "select ('medoid' | 'best-near-medoid'), "
         "density (part density, kg/m^3, 1..100000); docs/QUALITY.md. mass_kg (kg; default: the object version's "
         "mass_kg unless density is given), accel (m/s^2), hold ('any' | 'off'), position_tolerance (m): criterion "
         "(e), CONTRACT.md.",
