@@ -138,7 +138,13 @@ def run_part(label: str, part, args, members) -> dict:
     row = {"part": label, "gripper": gripper["name"], "configs": {}}
     t0 = time.perf_counter()
     # the judge's simulation; --noslip changes only its friction model (the pipeline's own validation keeps the default)
-    judge = dataclasses.replace(physics.SIM, noslip_iterations=args.noslip)
+    threshold, hulls = args.judge_coacd.split(":")
+    judge = dataclasses.replace(
+        physics.SIM,
+        noslip_iterations=args.noslip,
+        coacd_threshold=float(threshold),
+        coacd_max_hulls=int(hulls),
+    )
     sim = physics.prepare_part(part.mesh, spec, mass_kg=args.mass, seed=0, constants=judge)
     row["prepare_s"] = time.perf_counter() - t0
     row["geometry"] = f"{sim.geometry} ({sim.pieces})"
@@ -289,7 +295,9 @@ def markdown(rows, members, args, wall_s) -> str:
         "(e) and MuJoCo validation + repair. Every exported grasp is simulated nominally and under the "
         f"{len(members)} members of `physics.perturbation_set(0)`: nominal = held in the nominal simulation; all = "
         "held under every member; mean = mean share of members held; cov = stats.coverage at 1 cm / 30 deg. "
-        f"Judging simulations with {args.noslip} MuJoCo no-slip iterations (0: MuJoCo's soft friction). "
+        f"Judging simulations with {args.noslip} MuJoCo no-slip iterations (0: MuJoCo's soft friction) and the "
+        f"part decomposed by CoACD at threshold:max hulls {args.judge_coacd} (the validation: "
+        f"{physics.SIM.coacd_threshold:g}:{physics.SIM.coacd_max_hulls}). "
         f"Machine: {platform.machine()}, {os.cpu_count()} cores shared with other jobs, {args.workers} simulation "
         f"threads, mujoco {__import__('mujoco').__version__}.",
         "",
@@ -425,6 +433,12 @@ def main() -> None:
         type=int,
         default=physics.SIM.noslip_iterations,
         help="MuJoCo no-slip iterations of the judging simulations (0: MuJoCo's soft friction, which creeps)",
+    )
+    ap.add_argument(
+        "--judge-coacd",
+        default=f"{physics.SIM.coacd_threshold:g}:{physics.SIM.coacd_max_hulls}",
+        help="CoACD threshold:max_hulls of the judging simulations (default the validation's; finer = closer to the "
+        "part, slower to build)",
     )
     ap.add_argument("--sample", type=int, default=200)
     ap.add_argument("--sample-perturbed", type=int, default=30)
