@@ -267,7 +267,7 @@ def validation_set(friction: float) -> tuple[Perturbation, ...]:
 
 
 def simulate_robust(
-    sim: "SimPart",
+    sim: SimPart,
     poses: np.ndarray,
     widths: np.ndarray,
     members,
@@ -276,7 +276,7 @@ def simulate_robust(
     keys: np.ndarray | None = None,
     workers: int | None = None,
     inside: np.ndarray | None = None,
-) -> list["SimResult"]:
+) -> list[SimResult]:
     """One outcome per grasp under every member of `members` (validation_set): the first member's (the nominal)
     result when the grasp holds in all of them, else the result of the first member it fails, named in
     `SimResult.member`."""
