@@ -349,14 +349,15 @@ class SimPart:
             out["note"] = self.note
         return out
 
-    def model_for(self, p: Perturbation) -> Any:
-        """The MjModel for perturbation `p`: the shared one unless it changes the mass or the friction (built once
-        per setting, then shared read-only like the nominal one)."""
+    def model_for(self, p: Perturbation, *, palm: bool = True) -> Any:
+        """The MjModel for perturbation `p`: the shared one unless it changes the mass or the friction, or `palm` is
+        False (the palm collides with nothing), each built once per setting, then shared read-only like the nominal
+        one."""
         mu = self.friction if p.friction is None else float(p.friction)
         soft = bool(p.soft_friction) and self.constants.noslip_iterations > 0
-        if p.mass_scale == 1.0 and mu == self.friction and not soft:
+        if p.mass_scale == 1.0 and mu == self.friction and not soft and palm:
             return self.model
-        key = (float(p.mass_scale), mu, soft)
+        key = (float(p.mass_scale), mu, soft, bool(palm))
         with self._lock:
             if key not in self._variants:
                 import mujoco
@@ -370,6 +371,7 @@ class SimPart:
                     self.inertia * p.mass_scale,
                     replace(self.constants, noslip_iterations=0) if soft else self.constants,
                     self.grip_force,
+                    palm_collides=palm,
                 )
                 self._variants[key] = mujoco.MjModel.from_xml_string(xml)
             return self._variants[key]
@@ -465,7 +467,16 @@ def _fmt(values) -> str:
 
 
 def _xml(
-    pieces, spec: GripperSpec, friction: float, mass: float, com, inertia, c: SimConstants, grip_force: float
+    pieces,
+    spec: GripperSpec,
+    friction: float,
+    mass: float,
+    com,
+    inertia,
+    c: SimConstants,
+    grip_force: float,
+    *,
+    palm_collides: bool = True,
 ) -> str:
     t, fw, fd = spec.finger_thickness, spec.finger_width, spec.finger_depth
     half_stroke = spec.stroke / 2
@@ -491,7 +502,8 @@ def _xml(
     if box is not None:
         palm = (
             f'<geom name="palm" type="box" pos="{_fmt(box.center)}" size="{_fmt(np.asarray(box.extents) / 2)}" '
-            f'contype="1" conaffinity="2" condim="4" friction="{fric}" solref="{solref}"/>'
+            f'contype="{int(palm_collides)}" conaffinity="{2 * int(palm_collides)}" condim="4" friction="{fric}" '
+            f'solref="{solref}"/>'
         )
     close_range = max(half_stroke - spec.min_width / 2, 0.0)
     I = inertia
@@ -726,12 +738,33 @@ class _Grasp:
                 return True
         return False
 
+    def _palm_penetration(self) -> float:
+        """The deepest penetration (m, >= 0) of the part's pieces into the palm in the current state."""
+        if self.palm_geom < 0:
+            return 0.0
+        n = self.d.ncon
+        con = self.d.contact
+        palm = (con.geom1[:n] == self.palm_geom) | (con.geom2[:n] == self.palm_geom)
+        return max(0.0, -float(np.min(con.dist[:n][palm]))) if palm.any() else 0.0
+
+    def _without_palm(self) -> None:
+        """Go on in the model whose palm collides with nothing, from the same state."""
+        m = self.sim.model_for(self.p, palm=False)
+        d = self.mj.MjData(m)
+        d.qpos[:] = self.d.qpos
+        self.m, self.d = m, d
+
     def run(self) -> SimResult:
-        mj, m, d, c = self.mj, self.m, self.d, self.c
         if self.approach_collides():
             return SimResult(False, "collision", 0.0, 0.0, 0)
-        d.qvel[:] = 0.0
-        mj.mj_forward(m, d)
+        self.d.qvel[:] = 0.0
+        self.mj.mj_forward(self.m, self.d)
+        if self._palm_penetration() > self.c.approach_tolerance:
+            # the approach check forgave a convex piece reaching into the palm (the part's own surface is clear of
+            # it): MuJoCo would push the part out of that penetration at once and fling it from between the fingers
+            self._without_palm()
+            self.mj.mj_forward(self.m, self.d)
+        mj, m, d, c = self.mj, self.m, self.d, self.c
         d.ctrl[:] = -self.sim.grip_force if self.inside else self.sim.grip_force
         mj.mj_step(m, d, nstep=max(1, int(round(c.close_time / c.timestep))))
         n0, n1, _ = self._contacts()

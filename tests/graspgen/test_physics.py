@@ -508,3 +508,28 @@ def test_a_decomposition_is_made_once_per_mesh_and_setting(monkeypatch):
     physics.prepare_part(ring, SPEC, mass_kg=0.1, constants=coarse)  # another setting: decomposed again
     physics.prepare_part(ring.apply_translation([0.001, 0, 0]), SPEC, mass_kg=0.1)  # another mesh: again
     assert len(calls) == 3
+
+
+def test_a_piece_reaching_into_the_palm_where_the_part_does_not_is_not_flung_out(monkeypatch):
+    """A convex piece that bridges a recess can reach into the palm at the grasp where the part's own surface is
+    clear; the approach check forgives it, and then MuJoCo must not push the part out of that penetration (the
+    sileane pepper's hull reached 1.6 mm into the palm and the part flew from between the open fingers). Here a
+    20 mm block is gripped across x with an extra piece, 18 mm wide between the fingers, 2.5 mm into the palm."""
+    from graspgen.transforms import grasp_frames
+
+    block = trimesh.creation.box(extents=(0.02, 0.03, 0.02))
+    extra = trimesh.creation.box(extents=(0.018, 0.02, 0.0075))
+    extra.apply_translation([0.0, 0.0, -0.01375])  # z from -17.5 to -10 mm; the palm's front face is at -15 mm
+    monkeypatch.setattr(physics, "_decompose", lambda mesh, c, seed: ([block, extra], "coacd", None))
+    rolls = 2 * np.pi * np.arange(16) / 16
+    frames = grasp_frames(np.zeros((16, 3)), np.tile([[1.0, 0.0, 0.0]], (16, 1)), rolls)
+    T = frames[int(np.argmax(frames[:, 2, 2]))]  # grasp frame = object frame: the palm lies below the block
+    assert np.allclose(T[:3, :3], np.eye(3), atol=1e-9)
+    sim = physics.prepare_part(block, SPEC, mass_kg=0.1)
+    assert SPEC.palm_box().center[2] + SPEC.palm_box().extents[2] / 2 == pytest.approx(-0.015)
+    held = physics.simulate_grasp(sim, T, 0.02)
+    assert held.success, held
+    # the same grasp when the penetration is left to MuJoCo: the part is pushed out and lost
+    monkeypatch.setattr(physics._Grasp, "_palm_penetration", lambda self: 0.0)
+    flung = physics.simulate_grasp(sim, T, 0.02)
+    assert not flung.success
