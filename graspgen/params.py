@@ -142,8 +142,8 @@ class QualityOptions:
     )
     validate: bool = _option(
         False,
-        "simulate every exported grasp in MuJoCo, nominally and at mass x1.5, friction x0.8 and soft friction, "
-        "and repair failures (needs the part's mass and the gripper's grip_force)",
+        "simulate every exported grasp in MuJoCo, nominally, at mass x1.5, at friction x0.8 and with soft friction "
+        "at mass x1.5, and repair failures (needs the part's mass and the gripper's grip_force)",
     )
     repair_limit: int = 4
     sim_workers: int | None = None

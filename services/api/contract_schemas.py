@@ -108,8 +108,8 @@ class JobParams(BaseModel):
     validate_: bool | None = Field(
         None,
         alias="validate",
-        description="simulate every exported grasp in MuJoCo (nominal, mass x1.5, friction x0.8, soft friction: "
-        "it must hold in all four) and repair failures",
+        description="simulate every exported grasp in MuJoCo (nominal, mass x1.5, friction x0.8, soft friction at "
+        "mass x1.5: it must hold in all four) and repair failures",
     )
 
 

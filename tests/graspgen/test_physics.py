@@ -88,8 +88,8 @@ def test_validation_needs_the_grasp_to_hold_under_more_mass_and_less_friction():
     box = trimesh.creation.box(extents=(0.04, 0.03, 0.02))
     T, w = _pose([0, 0, 0], [1, 0, 0])[None], np.array([0.04])
     members = physics.validation_set(0.1)
-    assert [p.name for p in members] == ["nominal", "mass x1.5", "friction x0.8", "soft friction"]
-    assert members[3].soft_friction and not any(p.soft_friction for p in members[:3])
+    assert [p.name for p in members] == ["nominal", "mass x1.5", "friction x0.8", "soft friction, mass x1.5"]
+    assert members[3].soft_friction and members[3].mass_scale == 1.5 and not any(p.soft_friction for p in members[:3])
     assert members[2].friction == pytest.approx(0.08)
     heavy = physics.prepare_part(box, SPEC, friction=0.1, mass_kg=0.22)
     assert physics.simulate_grasps(heavy, T, w)[0].success
@@ -152,7 +152,7 @@ def test_generate_validates_every_exported_grasp():
     assert v["part"]["geometry"] == "convex" and v["engine"].startswith("mujoco")
     # the simulation used the job's mass and the gripper's force, not a steel / 20 N guess
     assert v["part"]["mass_kg"] == pytest.approx(0.2) and v["part"]["grip_force_n"] == 20.0
-    assert v["members"] == ["nominal", "mass x1.5", "friction x0.8", "soft friction"]
+    assert v["members"] == ["nominal", "mass x1.5", "friction x0.8", "soft friction, mass x1.5"]
     assert sum(v["failed_under"].values()) == v["tested"] - v["succeeded"]
     assert {"success", "reason", "slip_mm", "rotation_deg"} <= set(gs.grasps[0]["sim"])
     assert "validate" in gs.stats["timings_s"]
