@@ -69,7 +69,7 @@ __all__ = [
     "simulate_grasp",
     "simulate_grasps",
     "simulate_perturbed",
-    "simulate_robust",
+    "first_failures",
     "validation_set",
     "summarise",
 ]
@@ -257,8 +257,8 @@ def validation_set(friction: float) -> tuple[Perturbation, ...]:
     run's `friction`); and MuJoCo's soft friction (no no-slip iterations), the friction model of many simulator
     set-ups, with the heavier part: under soft friction a grasp resting on one or two contact points (an edge, a
     curved spot) creeps round the closing axis even under a small torque, and more under more load. A validated
-    grasp holds in all four: one simulator setting is not the
-    truth (bench_hold's perturbed failures of nominally held grasps were almost all under these)."""
+    grasp holds in all four: one simulator setting is not the truth (bench_hold's perturbed failures of nominally
+    held grasps were almost all under these)."""
     return (
         NOMINAL,
         Perturbation("mass x1.5", mass_scale=1.5),
@@ -267,23 +267,11 @@ def validation_set(friction: float) -> tuple[Perturbation, ...]:
     )
 
 
-def simulate_robust(
-    sim: SimPart,
-    poses: np.ndarray,
-    widths: np.ndarray,
-    members,
-    *,
-    seed: int = 0,
-    keys: np.ndarray | None = None,
-    workers: int | None = None,
-    inside: np.ndarray | None = None,
-) -> list[SimResult]:
-    """One outcome per grasp under every member of `members` (validation_set): the first member's (the nominal)
-    result when the grasp holds in all of them, else the result of the first member it fails, named in
-    `SimResult.member`."""
-    members = list(members)
+def first_failures(grid: list[list[SimResult]], members) -> list[SimResult]:
+    """One outcome per grasp of simulate_perturbed's `grid` under `members` (validation_set): the first member's
+    (the nominal) result when the grasp held in all of them, else the result of the first member it failed, named
+    in `SimResult.member`."""
     names = [p.name for p in members]
-    grid = simulate_perturbed(sim, poses, widths, members, seed=seed, keys=keys, workers=workers, inside=inside)
     out = []
     for row in grid:
         failed = next((j for j, r in enumerate(row) if not r.success), None)

@@ -899,9 +899,9 @@ def _poses(cands: Candidates, idx: np.ndarray) -> np.ndarray:
 
 
 def _validate(cands, labels, selected, clusters, spec, mu, params, extras: _Extras, stats, report):
-    """Simulate the selected grasps under physics.validation_set (nominal, mass x1.5, friction x0.8, soft
-    friction): a grasp passes when it holds in all of them. Replace each failing one by the first of up to `repair_limit` members of
-    its final cluster (nearest to it first) that passes. Returns the new selection and its SimResults."""
+    """Simulate the selected grasps under every member of physics.validation_set: a grasp passes when it holds in
+    all of them. Replace each failing one by the first of up to `repair_limit` members of its final cluster (nearest
+    to it first) that passes. Returns the new selection and its SimResults (physics.first_failures)."""
     from . import physics
 
     report("validate", 0.0)
@@ -913,15 +913,18 @@ def _validate(cands, labels, selected, clusters, spec, mu, params, extras: _Extr
     report("validate", 0.1)
     widths = cands.widths
     checks = physics.validation_set(mu)
-    run = lambda idx: physics.simulate_robust(  # noqa: E731
-        sim_part,
-        _poses(cands, idx),
-        widths[idx],
+    run = lambda idx: physics.first_failures(  # noqa: E731
+        physics.simulate_perturbed(
+            sim_part,
+            _poses(cands, idx),
+            widths[idx],
+            checks,
+            seed=params.seed,
+            keys=idx,
+            workers=extras.options.sim_workers,
+            inside=cands.inside[idx],
+        ),
         checks,
-        seed=params.seed,
-        keys=idx,
-        workers=extras.options.sim_workers,
-        inside=cands.inside[idx],
     )
     results = run(selected)
     first = list(results)

@@ -93,11 +93,11 @@ def test_validation_needs_the_grasp_to_hold_under_more_mass_and_less_friction():
     assert members[2].friction == pytest.approx(0.08)
     heavy = physics.prepare_part(box, SPEC, friction=0.1, mass_kg=0.22)
     assert physics.simulate_grasps(heavy, T, w)[0].success
-    (r,) = physics.simulate_robust(heavy, T, w, members)
+    (r,) = physics.first_failures(physics.simulate_perturbed(heavy, T, w, members), members)
     assert not r.success and r.member == "mass x1.5" and r.reason == "dropped"
     assert r.to_json()["member"] == "mass x1.5"
     light = physics.prepare_part(box, SPEC, friction=0.1, mass_kg=0.18)
-    (r,) = physics.simulate_robust(light, T, w, members)
+    (r,) = physics.first_failures(physics.simulate_perturbed(light, T, w, members), members)
     assert r.success and r.member is None and "member" not in r.to_json()
 
 
@@ -168,13 +168,13 @@ def test_failed_medoids_are_repaired_from_their_own_cluster(monkeypatch):
     def fake(sim, poses, widths, members, *, seed=0, keys=None, workers=None, inside=None):
         calls.append(list(keys))
         return [
-            physics.SimResult(False, "slipped", 9.0, 0.0, 2)
+            [physics.SimResult(False, "slipped", 9.0, 0.0, 2)]
             if int(k) in medoids
-            else physics.SimResult(True, None, 0.1, 0.0, 2)
+            else [physics.SimResult(True, None, 0.1, 0.0, 2)] * len(members)
             for k in keys
         ]
 
-    monkeypatch.setattr(physics, "simulate_robust", fake)
+    monkeypatch.setattr(physics, "simulate_perturbed", fake)
     gs = graspgen.generate(box, GRIPPER, units="m", points=1200, k1=3, k2=2, validate=True, mass_kg=0.2, repair_limit=2)
     v = gs.stats["validation"]
     assert v["first_pass"]["succeeded"] == 0 and v["succeeded"] == 6 and v["repaired"] == 6
@@ -190,9 +190,9 @@ def test_repair_gives_up_after_the_limit(monkeypatch):
     box = trimesh.creation.box(extents=(0.04, 0.03, 0.02))
 
     def fail(sim, poses, widths, members, *, seed=0, keys=None, workers=None, inside=None):
-        return [physics.SimResult(False, "dropped", 30.0, 0.0, 0) for _ in keys]
+        return [[physics.SimResult(False, "dropped", 30.0, 0.0, 0)] for _ in keys]
 
-    monkeypatch.setattr(physics, "simulate_robust", fail)
+    monkeypatch.setattr(physics, "simulate_perturbed", fail)
     gs = graspgen.generate(box, GRIPPER, units="m", points=1200, k1=3, k2=2, validate=True, mass_kg=0.2, repair_limit=3)
     v = gs.stats["validation"]
     assert v["succeeded"] == 0 and v["repaired"] == 0 and v["simulated"] == 6 * 4
