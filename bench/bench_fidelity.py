@@ -14,7 +14,6 @@ every member. No assertions.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -29,7 +28,6 @@ import bench_hold  # noqa: E402
 import graspgen  # noqa: E402
 from graspgen import physics  # noqa: E402
 from graspgen.gripper import GripperSpec  # noqa: E402
-from graspgen.pipeline import _poses  # noqa: E402
 
 
 def main() -> None:
@@ -38,7 +36,6 @@ def main() -> None:
     ap.add_argument("--settings", nargs="*", default=["0.08:24", "0.04:48"])
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
-    settings = [(float(s.split(":")[0]), int(s.split(":")[1])) for s in args.settings]
     members = [physics.NOMINAL, *physics.perturbation_set(0)]
     print("| part | threshold | max hulls | pieces | decompose | grasps | held nominally | held under every member |")
     print("|---|---|---|---|---|---|---|---|")
@@ -48,29 +45,20 @@ def main() -> None:
         gs = graspgen.generate(part, gripper, points=5000, k1=8, k2=2, seed=0, hold="any", mass_kg=0.2)
         c = gs.candidates
         idx = np.array([g["candidate"] for g in gs.grasps], dtype=np.int64)
-        for threshold, hulls in settings:
-            const = dataclasses.replace(physics.SIM, coacd_threshold=threshold, coacd_max_hulls=hulls)
+        for setting in args.settings:
+            const = bench_hold.judge_constants(setting)
             t0 = time.perf_counter()
             sim = physics.prepare_part(part.mesh, spec, mass_kg=0.2, seed=0, constants=const)
             t_prep = time.perf_counter() - t0
             if len(idx):
-                grid = physics.simulate_perturbed(
-                    sim,
-                    _poses(c, idx),
-                    c.widths[idx],
-                    members,
-                    seed=0,
-                    keys=idx,
-                    workers=args.workers,
-                    inside=c.inside[idx],
-                )
+                grid = bench_hold.judge(sim, c, idx, members, args.workers)
                 ok = np.array([[r.success for r in row] for row in grid], dtype=bool)
                 nominal, every = int(ok[:, 0].sum()), int(ok.all(axis=1).sum())
             else:
                 nominal = every = 0
             print(
-                f"| {label} | {threshold:g} | {hulls} | {sim.pieces} | {t_prep:.1f} s | {len(idx)} | {nominal} | "
-                f"{every} |",
+                f"| {label} | {const.coacd_threshold:g} | {const.coacd_max_hulls} | {sim.pieces} | {t_prep:.1f} s | "
+                f"{len(idx)} | {nominal} | {every} |",
                 flush=True,
             )
 

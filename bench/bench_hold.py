@@ -132,20 +132,31 @@ def hold_margins_of(part, gs, idx: np.ndarray, spec: GripperSpec, args) -> np.nd
     )
 
 
+def judge_constants(coacd: str, noslip: int = physics.SIM.noslip_iterations) -> physics.SimConstants:
+    """The judging simulations' constants: CoACD's `threshold:max_hulls` and the no-slip iterations (0: MuJoCo's
+    soft friction); everything else is the validation's."""
+    threshold, hulls = coacd.split(":")
+    return dataclasses.replace(
+        physics.SIM, noslip_iterations=noslip, coacd_threshold=float(threshold), coacd_max_hulls=int(hulls)
+    )
+
+
+def judge(sim, c, idx: np.ndarray, members, workers: int) -> list[list]:
+    """Candidates `idx` of candidate set `c`, each simulated at its exported pose under every member."""
+    return physics.simulate_perturbed(
+        sim, _poses(c, idx), c.widths[idx], members, seed=0, keys=idx, workers=workers, inside=c.inside[idx]
+    )
+
+
 def run_part(label: str, part, args, members) -> dict:
     gripper = gripper_for(part.mesh, args.grip_force)
     spec = GripperSpec.from_dict(gripper)
     row = {"part": label, "gripper": gripper["name"], "configs": {}}
     t0 = time.perf_counter()
     # the judge's simulation; --noslip changes only its friction model (the pipeline's own validation keeps the default)
-    threshold, hulls = args.judge_coacd.split(":")
-    judge = dataclasses.replace(
-        physics.SIM,
-        noslip_iterations=args.noslip,
-        coacd_threshold=float(threshold),
-        coacd_max_hulls=int(hulls),
+    sim = physics.prepare_part(
+        part.mesh, spec, mass_kg=args.mass, seed=0, constants=judge_constants(args.judge_coacd, args.noslip)
     )
-    sim = physics.prepare_part(part.mesh, spec, mass_kg=args.mass, seed=0, constants=judge)
     row["prepare_s"] = time.perf_counter() - t0
     row["geometry"] = f"{sim.geometry} ({sim.pieces})"
     paper_gs = None
@@ -180,16 +191,7 @@ def run_part(label: str, part, args, members) -> dict:
             cset = hashlib.sha1(np.ascontiguousarray(c.contacts).tobytes()).hexdigest()
             todo = np.array([i for i in idx if (cset, int(i)) not in cache], dtype=np.int64)
             if len(todo):
-                new = physics.simulate_perturbed(
-                    sim,
-                    _poses(c, todo),
-                    c.widths[todo],
-                    [physics.NOMINAL, *members],
-                    seed=0,
-                    keys=todo,
-                    workers=args.workers,
-                    inside=c.inside[todo],
-                )
+                new = judge(sim, c, todo, [physics.NOMINAL, *members], args.workers)
                 cache.update({(cset, int(i)): g for i, g in zip(todo, new, strict=True)})
             grid = [cache[(cset, int(i))] for i in idx]
             out["sim_s"] = time.perf_counter() - t0
@@ -219,27 +221,9 @@ def run_part(label: str, part, args, members) -> dict:
         if margins is not None:
             m = min(args.sample_perturbed, len(idx))  # the first m of the sample also under every perturbation
             rest = [physics.NOMINAL] + list(members)
-            grid = physics.simulate_perturbed(
-                sim,
-                _poses(c, idx),
-                c.widths[idx],
-                rest[:1],
-                seed=0,
-                keys=idx,
-                workers=args.workers,
-                inside=c.inside[idx],
-            )
+            grid = judge(sim, c, idx, rest[:1], args.workers)
             if m:
-                pert = physics.simulate_perturbed(
-                    sim,
-                    _poses(c, idx[:m]),
-                    c.widths[idx[:m]],
-                    rest[1:],
-                    seed=0,
-                    keys=idx[:m],
-                    workers=args.workers,
-                    inside=c.inside[idx[:m]],
-                )
+                pert = judge(sim, c, idx[:m], rest[1:], args.workers)
                 grid = [g + pert[i] if i < m else g for i, g in enumerate(grid)]
             passed = margins >= 1.0
             row["margins_sample"] = [round(float(x), 4) for x in margins]
