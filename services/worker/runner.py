@@ -52,6 +52,20 @@ def abandoned_before(settings: Settings, now: datetime | None = None) -> datetim
     return (now or utcnow()) - timedelta(seconds=settings.job_time_limit_s + settings.reconcile_grace_s)
 
 
+def _time_limit_in(exc: BaseException) -> bool:
+    """Did the soft time limit or the runner's deadline end the job? Also when the signal landed inside compiled
+    code that called back into Python (numba unpickling a constant), which re-raises it wrapped in a SystemError:
+    the limit is then the exception's cause or context."""
+    seen: set[int] = set()
+    e: BaseException | None = exc
+    while e is not None and id(e) not in seen:
+        if isinstance(e, (SoftTimeLimitExceeded, _TimeLimitError)):
+            return True
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return False
+
+
 class _TimeLimitError(Exception):
     pass
 
@@ -79,14 +93,16 @@ class JobRunner:
             with tempfile.TemporaryDirectory(prefix="graspgen-job-") as tmp:
                 result = self._execute(inputs, Path(tmp))
                 return self._commit_result(inputs, *result)
-        except (SoftTimeLimitExceeded, _TimeLimitError):
-            limit = self.settings.job_soft_time_limit_s
-            return self._end(
-                jid, "failed", jobs.problem("time-limit", "Time limit exceeded", f"the job ran longer than {limit} s")
-            )
         except Exception as exc:
             from graspgen.errors import Cancelled, GraspgenError
 
+            if _time_limit_in(exc):
+                limit = self.settings.job_soft_time_limit_s
+                return self._end(
+                    jid,
+                    "failed",
+                    jobs.problem("time-limit", "Time limit exceeded", f"the job ran longer than {limit} s"),
+                )
             if isinstance(exc, Cancelled):
                 return self._end(jid, "cancelled")
             if is_unavailable(exc):

@@ -173,3 +173,29 @@ def test_each_job_writes_a_loadable_recording(pg_service, runner, pair, tmp_path
     assert "/job" in printed.stdout  # the job's metadata beside the core's own logging
     assert f'"{jid}"' in printed.stdout  # one recording per job: its id is the job id
     assert printed.stdout.count("Chunk(") > 2  # and the core logged into it
+
+
+@pytest.mark.parametrize(
+    ("cause", "code"),
+    [("soft-limit", "time-limit"), ("other", "internal-error")],
+)
+def test_a_time_limit_wrapped_by_compiled_code_is_a_time_limit(pg_service, runner, pair, monkeypatch, cause, code):
+    """Celery's soft limit is a signal: landing while numba calls back into Python (unpickling a constant), it comes
+    out as a SystemError whose cause is SoftTimeLimitExceeded (seen in test_time_limit). That is the time limit, not
+    an internal error; a SystemError of any other cause still is one."""
+    from celery.exceptions import SoftTimeLimitExceeded
+
+    def execute(inputs, tmp):
+        try:
+            raise SoftTimeLimitExceeded() if cause == "soft-limit" else ValueError("boom")
+        except Exception as inner:
+            raise SystemError(
+                "CPUDispatcher(<function _assign_parallel>) returned a result with an exception set"
+            ) from inner
+
+    monkeypatch.setattr(runner, "_execute", execute)
+    obj, grip = pair
+    jid = submit(pg_service, obj, grip)
+    assert runner.run(jid) == "failed"
+    job = pg_service.get(f"/v1/jobs/{jid}").json()
+    assert job["state"] == "failed" and job["error"]["code"] == code and job["grasp_set"] is None
