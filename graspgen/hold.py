@@ -45,7 +45,7 @@ from .sampling import cell_grid, cell_runs
 
 _CHUNK = 1024  # candidates per unit of parallel work
 
-__all__ = ["HoldModel", "HOLD", "torsion_radii", "hold_margins", "part_mass", "hold_load"]
+__all__ = ["HoldModel", "HOLD", "torsion_radii", "hold_margins", "hold_margins_of_pairs", "part_mass", "hold_load"]
 
 
 @dataclass(frozen=True)
@@ -150,15 +150,34 @@ def tilt_factors(contacts: np.ndarray, normals: np.ndarray, friction: float) -> 
     tilted by theta from the closing axis: the finger pushes along the axis, so the contact force already leans
     theta inside the friction cone (half-angle phi = atan(mu)) before any load, and a load leaning further has
     tan(phi - theta) F left instead of tan(phi) F (the worst direction, taken for every direction). 0 at or beyond
-    the cone's edge (that contact holds no load); 1 for a normal along the axis."""
-    c = np.asarray(contacts, dtype=np.float64).reshape(-1, 2, 3)
-    n = np.asarray(normals, dtype=np.float64).reshape(-1, 2, 3)
-    axis = c[:, 1] - c[:, 0]
-    axis = axis / np.maximum(np.linalg.norm(axis, axis=1), 1e-300)[:, None]
-    cos = np.abs(np.einsum("nkd,nd->nk", n, axis)) / np.maximum(np.linalg.norm(n, axis=2), 1e-300)
-    theta = np.arccos(np.clip(cos, 0.0, 1.0))
-    phi = math.atan(float(friction))
-    return np.clip(np.tan(np.maximum(phi - theta, 0.0)) / math.tan(phi), 0.0, 1.0)
+    the cone's edge (that contact holds no load); 1 for a normal along the axis. The margin kernel computes the same
+    per candidate (_tilt)."""
+    c = np.ascontiguousarray(contacts, dtype=np.float64).reshape(-1, 2, 3)
+    n = np.ascontiguousarray(normals, dtype=np.float64).reshape(-1, 2, 3)
+    out = np.empty((len(c), 2), dtype=np.float64)
+    _tilt_kernel(c, n, float(friction), out)
+    return out
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _tilt(ax, ay, az, nx, ny, nz, phi, tan_phi):
+    """tilt_factors of one contact: unit closing axis a, surface normal n (any length)."""
+    nl = max(np.sqrt(nx * nx + ny * ny + nz * nz), 1e-300)
+    cos = min(abs(nx * ax + ny * ay + nz * az) / nl, 1.0)
+    return min(max(np.tan(max(phi - np.arccos(cos), 0.0)) / tan_phi, 0.0), 1.0)
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _tilt_kernel(C, N, mu, out):
+    phi = math.atan(mu)
+    tan_phi = math.tan(phi)
+    for n in prange(C.shape[0]):
+        ax = C[n, 1, 0] - C[n, 0, 0]
+        ay = C[n, 1, 1] - C[n, 0, 1]
+        az = C[n, 1, 2] - C[n, 0, 2]
+        w = max(np.sqrt(ax * ax + ay * ay + az * az), 1e-300)
+        for k in range(2):
+            out[n, k] = _tilt(ax / w, ay / w, az / w, N[n, k, 0], N[n, k, 1], N[n, k, 2], phi, tan_phi)
 
 
 def _half_sphere(count: int) -> np.ndarray:
@@ -190,25 +209,76 @@ def hold_margins(
     reports an upper bound of it (below `floor`): criterion (e) needs no more."""
     contacts = np.ascontiguousarray(contacts, dtype=np.float64).reshape(-1, 2, 3)
     radii = np.ascontiguousarray(radii, dtype=np.float64).reshape(-1, 2)
-    if len(radii) != len(contacts):
+    n = len(contacts)
+    if len(radii) != n:
         raise ValueError("radii must be (n, 2) for n candidates")
-    if normals is None:
-        tilt = np.ones((len(contacts), 2), dtype=np.float64)
-    else:
+    if normals is not None:
         normals = np.asarray(normals, dtype=np.float64).reshape(-1, 2, 3)
-        if len(normals) != len(contacts):
+        if len(normals) != n:
             raise ValueError("normals must be (n, 2, 3) for n candidates")
-        tilt = tilt_factors(contacts, normals, friction)
+        normals = normals.reshape(-1, 3)
+    i = np.arange(0, 2 * n, 2, dtype=np.int64)
+    return _margins(
+        contacts.reshape(-1, 3),
+        normals,
+        radii.reshape(-1),
+        i,
+        i + 1,
+        center_of_mass,
+        load,
+        grip_force,
+        friction,
+        model,
+        floor,
+    )
+
+
+def hold_margins_of_pairs(
+    points: np.ndarray,
+    normals: np.ndarray,
+    radii: np.ndarray,
+    i: np.ndarray,
+    j: np.ndarray,
+    center_of_mass: np.ndarray,
+    *,
+    load: float,
+    grip_force: float,
+    friction: float,
+    model: HoldModel = HOLD,
+    floor: float = 0.0,
+) -> np.ndarray:
+    """hold_margins of the candidates (points[i], points[j]) with the sample's `normals` (k, 3) and per-point
+    torsion radii `radii` (k,) (torsion_radii): the same margins, without (n, 2, 3) arrays of contacts and normals."""
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    i = np.ascontiguousarray(i, dtype=np.int64)
+    j = np.ascontiguousarray(j, dtype=np.int64)
+    if len(i) != len(j):
+        raise ValueError("i and j must have the same length")
+    if len(i) and (min(int(i.min()), int(j.min())) < 0 or max(int(i.max()), int(j.max())) >= len(pts)):
+        raise ValueError(f"point indices must lie in [0, {len(pts)})")
+    nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    rho = np.asarray(radii, dtype=np.float64).reshape(-1)
+    if len(nrm) != len(pts) or len(rho) != len(pts):
+        raise ValueError("normals and radii must have one row per point")
+    return _margins(pts, nrm, rho, i, j, center_of_mass, load, grip_force, friction, model, floor)
+
+
+def _margins(P, normals, rho, i, j, center_of_mass, load, grip_force, friction, model, floor) -> np.ndarray:
+    """The margin kernel over the pairs (P[i], P[j]); normals None: both contacts on the closing axis."""
     com = np.ascontiguousarray(center_of_mass, dtype=np.float64).reshape(3)
-    out = np.empty(len(contacts), dtype=np.float64)
-    if len(contacts) == 0:
+    out = np.empty(len(i), dtype=np.float64)
+    if len(i) == 0:
         return out
+    nrm = np.zeros((0, 3)) if normals is None else np.ascontiguousarray(normals, dtype=np.float64)
     _margins_kernel(
-        contacts,
-        radii,
-        tilt,
+        P,
+        nrm,
+        np.ascontiguousarray(rho, dtype=np.float64),
+        i,
+        j,
         com,
         float(load),
+        float(friction),
         float(friction) * float(grip_force),
         _half_sphere(model.directions),
         int(model.bisection_steps),
@@ -291,110 +361,140 @@ def _limit(best, a0, a1, b, c0, c1, inv_c, steps):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _margins_kernel(C, rho, tilt, com, W, cap, dirs, steps, max_margin, floor, out):
+def _margins_kernel(P, Nrm, rho, I, J, com, W, mu, cap, dirs, steps, max_margin, floor, out):
     K = dirs.shape[0]
     # refinement: around the worst direction, 8 neighbours at 1/2, 1/4 and 1/8 of the lattice spacing
     spacing = np.sqrt(2.0 * np.pi / K)
     ring_c = np.cos(np.arange(8) * np.pi / 4.0)
     ring_s = np.sin(np.arange(8) * np.pi / 4.0)
     w_cap = W / cap
-    N = C.shape[0]
+    phi = math.atan(mu)
+    tan_phi = math.tan(phi)
+    tilted = Nrm.shape[0] > 0
+    N = I.shape[0]
     chunks = (N + _CHUNK - 1) // _CHUNK
     for ch in prange(chunks):
         co = np.empty((K, 3))
         for n in range(ch * _CHUNK, min(N, (ch + 1) * _CHUNK)):
+            a, b = I[n], J[n]
+            k0 = k1 = 1.0
+            if tilted:
+                ax = P[b, 0] - P[a, 0]
+                ay = P[b, 1] - P[a, 1]
+                az = P[b, 2] - P[a, 2]
+                w = max(np.sqrt(ax * ax + ay * ay + az * az), 1e-300)
+                ax, ay, az = ax / w, ay / w, az / w
+                k0 = _tilt(ax, ay, az, Nrm[a, 0], Nrm[a, 1], Nrm[a, 2], phi, tan_phi)
+                k1 = _tilt(ax, ay, az, Nrm[b, 0], Nrm[b, 1], Nrm[b, 2], phi, tan_phi)
             out[n] = _margin_one(
-                C, rho, tilt, com, W, cap, dirs, steps, max_margin, floor, n, co, spacing, ring_c, ring_s, w_cap
+                P,
+                a,
+                b,
+                rho[a],
+                rho[b],
+                k0,
+                k1,
+                com,
+                W,
+                cap,
+                dirs,
+                steps,
+                max_margin,
+                floor,
+                co,
+                spacing,
+                ring_c,
+                ring_s,
+                w_cap,
             )
 
 
 @njit(cache=True, error_model="numpy")
-def _margin_one(C, rho, tilt, com, W, cap, dirs, steps, max_margin, floor, n, co, spacing, ring_c, ring_s, w_cap):
+def _margin_one(
+    P, ia, ib, rho0, rho1, k0, k1, com, W, cap, dirs, steps, max_margin, floor, co, spacing, ring_c, ring_s, w_cap
+):
     K = dirs.shape[0]
-    k0, k1 = tilt[n, 0], tilt[n, 1]
     if k0 <= 0.0 or k1 <= 0.0:  # a contact on the cone's edge has no friction left for any load
         return 0.0
-    if True:
-        ax = C[n, 1, 0] - C[n, 0, 0]
-        ay = C[n, 1, 1] - C[n, 0, 1]
-        az = C[n, 1, 2] - C[n, 0, 2]
-        w = np.sqrt(ax * ax + ay * ay + az * az)
-        ax, ay, az = ax / w, ay / w, az / w
-        # any orthonormal (e1, e2) perpendicular to the axis: the model is symmetric about it
-        if abs(ax) < 0.9:
-            ux, uy, uz = 1.0, 0.0, 0.0
-        else:
-            ux, uy, uz = 0.0, 1.0, 0.0
-        e1x = uy * az - uz * ay
-        e1y = uz * ax - ux * az
-        e1z = ux * ay - uy * ax
-        l1 = np.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
-        e1x, e1y, e1z = e1x / l1, e1y / l1, e1z / l1
-        e2x = ay * e1z - az * e1y
-        e2y = az * e1x - ax * e1z
-        e2z = ax * e1y - ay * e1x
-        mx = 0.5 * (C[n, 0, 0] + C[n, 1, 0])
-        my = 0.5 * (C[n, 0, 1] + C[n, 1, 1])
-        mz = 0.5 * (C[n, 0, 2] + C[n, 1, 2])
-        qx, qy, qz = com[0] - mx, com[1] - my, com[2] - mz
-        rx = qx * ax + qy * ay + qz * az
-        ry = qx * e1x + qy * e1y + qz * e1z
-        rz = qx * e2x + qy * e2y + qz * e2z
-        inv_h = 2.0 / w
-        c0 = cap * k0 * rho[n, 0]
-        c1 = cap * k1 * rho[n, 1]
-        # the tangential loads over each contact's own capacity mu F k: a0 and a1 of _coeffs divided by k
-        w_cap0 = w_cap / k0
-        w_cap1 = w_cap / k1
-        inv_c = 1.0 / (c0 + c1)
-        # the direction with the lowest lower bound first: most other directions then end at their bound
-        first = 0
-        low = np.inf
+    ax = P[ib, 0] - P[ia, 0]
+    ay = P[ib, 1] - P[ia, 1]
+    az = P[ib, 2] - P[ia, 2]
+    w = np.sqrt(ax * ax + ay * ay + az * az)
+    ax, ay, az = ax / w, ay / w, az / w
+    # any orthonormal (e1, e2) perpendicular to the axis: the model is symmetric about it
+    if abs(ax) < 0.9:
+        ux, uy, uz = 1.0, 0.0, 0.0
+    else:
+        ux, uy, uz = 0.0, 1.0, 0.0
+    e1x = uy * az - uz * ay
+    e1y = uz * ax - ux * az
+    e1z = ux * ay - uy * ax
+    l1 = np.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
+    e1x, e1y, e1z = e1x / l1, e1y / l1, e1z / l1
+    e2x = ay * e1z - az * e1y
+    e2y = az * e1x - ax * e1z
+    e2z = ax * e1y - ay * e1x
+    mx = 0.5 * (P[ia, 0] + P[ib, 0])
+    my = 0.5 * (P[ia, 1] + P[ib, 1])
+    mz = 0.5 * (P[ia, 2] + P[ib, 2])
+    qx, qy, qz = com[0] - mx, com[1] - my, com[2] - mz
+    rx = qx * ax + qy * ay + qz * az
+    ry = qx * e1x + qy * e1y + qz * e1z
+    rz = qx * e2x + qy * e2y + qz * e2z
+    inv_h = 2.0 / w
+    c0 = cap * k0 * rho0
+    c1 = cap * k1 * rho1
+    # the tangential loads over each contact's own capacity mu F k: a0 and a1 of _coeffs divided by k
+    w_cap0 = w_cap / k0
+    w_cap1 = w_cap / k1
+    inv_c = 1.0 / (c0 + c1)
+    # the direction with the lowest lower bound first: most other directions then end at their bound
+    first = 0
+    low = np.inf
+    for k in range(K):
+        a0, a1, b = _coeffs(dirs[k, 0], dirs[k, 1], dirs[k, 2], rx, ry, rz, inv_h, w_cap0, w_cap1, W)
+        co[k, 0], co[k, 1], co[k, 2] = a0, a1, b
+        lb = _lower(a0, a1, b, c0, c1, inv_c)
+        if lb < low:
+            low = lb
+            first = k
+    best = _limit(max_margin, co[first, 0], co[first, 1], co[first, 2], c0, c1, inv_c, steps)
+    worst = first
+    if best >= floor:
         for k in range(K):
-            a0, a1, b = _coeffs(dirs[k, 0], dirs[k, 1], dirs[k, 2], rx, ry, rz, inv_h, w_cap0, w_cap1, W)
-            co[k, 0], co[k, 1], co[k, 2] = a0, a1, b
-            lb = _lower(a0, a1, b, c0, c1, inv_c)
-            if lb < low:
-                low = lb
-                first = k
-        best = _limit(max_margin, co[first, 0], co[first, 1], co[first, 2], c0, c1, inv_c, steps)
-        worst = first
-        if best >= floor:
-            for k in range(K):
-                s = _limit(best, co[k, 0], co[k, 1], co[k, 2], c0, c1, inv_c, steps)
-                if s < best:
-                    best = s
-                    worst = k
-                    if best < floor:
-                        break
-        dx, dy, dz = dirs[worst, 0], dirs[worst, 1], dirs[worst, 2]
-        step = 0.5 * spacing
-        for _ in range(3):
-            if best < floor:
-                break
-            # two tangent vectors at d
-            if abs(dx) < 0.9:
-                px, py, pz = 0.0, -dz, dy
-            else:
-                px, py, pz = dz, 0.0, -dx
-            lp = np.sqrt(px * px + py * py + pz * pz)
-            px, py, pz = px / lp, py / lp, pz / lp
-            qx2 = dy * pz - dz * py
-            qy2 = dz * px - dx * pz
-            qz2 = dx * py - dy * px
-            bx, by, bz = dx, dy, dz
-            for j in range(8):
-                ca = ring_c[j] * step
-                sa = ring_s[j] * step
-                vx = bx + ca * px + sa * qx2
-                vy = by + ca * py + sa * qy2
-                vz = bz + ca * pz + sa * qz2
-                lv = np.sqrt(vx * vx + vy * vy + vz * vz)
-                a0, a1, b = _coeffs(vx / lv, vy / lv, vz / lv, rx, ry, rz, inv_h, w_cap0, w_cap1, W)
-                s = _limit(best, a0, a1, b, c0, c1, inv_c, steps)
-                if s < best:
-                    best = s
-                    dx, dy, dz = vx / lv, vy / lv, vz / lv
-            step *= 0.5
-        return min(best, max_margin)
-    return max_margin
+            s = _limit(best, co[k, 0], co[k, 1], co[k, 2], c0, c1, inv_c, steps)
+            if s < best:
+                best = s
+                worst = k
+                if best < floor:
+                    break
+    dx, dy, dz = dirs[worst, 0], dirs[worst, 1], dirs[worst, 2]
+    step = 0.5 * spacing
+    for _ in range(3):
+        if best < floor:
+            break
+        # two tangent vectors at d
+        if abs(dx) < 0.9:
+            px, py, pz = 0.0, -dz, dy
+        else:
+            px, py, pz = dz, 0.0, -dx
+        lp = np.sqrt(px * px + py * py + pz * pz)
+        px, py, pz = px / lp, py / lp, pz / lp
+        qx2 = dy * pz - dz * py
+        qy2 = dz * px - dx * pz
+        qz2 = dx * py - dy * px
+        bx, by, bz = dx, dy, dz
+        for j in range(8):
+            ca = ring_c[j] * step
+            sa = ring_s[j] * step
+            vx = bx + ca * px + sa * qx2
+            vy = by + ca * py + sa * qy2
+            vz = bz + ca * pz + sa * qz2
+            lv = np.sqrt(vx * vx + vy * vy + vz * vz)
+            a0, a1, b = _coeffs(vx / lv, vy / lv, vz / lv, rx, ry, rz, inv_h, w_cap0, w_cap1, W)
+            s = _limit(best, a0, a1, b, c0, c1, inv_c, steps)
+            if s < best:
+                best = s
+                dx, dy, dz = vx / lv, vy / lv, vz / lv
+        step *= 0.5
+    return min(best, max_margin)

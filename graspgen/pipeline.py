@@ -368,15 +368,13 @@ def _hold_part(run: _Run, loaded: _Loaded, surface: _Surface, survivors: _Surviv
         pts, s = surface.points, survivors
         rho = _hold.torsion_radii(pts, surface.normals, _patch_radius(spec))
         load = _hold.hold_load(loaded.mass_kg, params.accel)
-        contacts = np.stack([pts[s.i], pts[s.j]], axis=1)
-        radii = np.stack([rho[s.i], rho[s.j]], axis=1)
-        normals = np.stack([surface.normals[s.i], surface.normals[s.j]], axis=1)
-        hold_args = dict(normals=normals, load=load, grip_force=spec.grip_force, friction=run.mu)
-        margins = _hold.hold_margins(contacts, radii, com, floor=1.0, **hold_args)
+        pair = (pts, surface.normals, rho, s.i, s.j, com)
+        hold_args = dict(load=load, grip_force=spec.grip_force, friction=run.mu)
+        margins = _hold.hold_margins_of_pairs(*pair, floor=1.0, **hold_args)
         keep = margins >= 1.0
         removed = int(np.sum(~keep))
         if len(s) and not keep.any():
-            best = float(np.max(_hold.hold_margins(contacts, radii, com, **hold_args)))
+            best = float(np.max(_hold.hold_margins_of_pairs(*pair, **hold_args)))
             diagnosis = _hold_diagnosis(best, spec, loaded.mass_kg, params)
         survivors = replace(s, hold_margin=margins).keep(keep)
     run.timings["hold"] = time.perf_counter() - t0

@@ -134,6 +134,32 @@ def test_floor_stops_early_below_it_and_changes_nothing_above():
     np.testing.assert_array_equal(cut[full >= 1], full[full >= 1])
 
 
+def test_margins_of_point_pairs_equal_the_stacked_margins():
+    """The pipeline's entry point (pairs of sample points, per-point normals and radii) gives, bit for bit, the
+    margins of the (n, 2, 3) entry point on the same candidates, and refuses indices outside the sample."""
+    pts, nrm = _sample(trimesh.creation.annulus(r_min=0.02, r_max=0.04, height=0.03), 600)
+    rho = hold.torsion_radii(pts, nrm, 0.005)
+    rng = np.random.default_rng(2)
+    i, j = rng.integers(0, len(pts), size=(2, 3000))
+    i, j = i[i != j], j[i != j]
+    com = np.array([0.001, 0.0, 0.002])
+    kw = dict(load=2.0, grip_force=F, friction=MU)
+    stacked = hold.hold_margins(
+        np.stack([pts[i], pts[j]], axis=1),
+        np.stack([rho[i], rho[j]], axis=1),
+        com,
+        normals=np.stack([nrm[i], nrm[j]], axis=1),
+        **kw,
+    )
+    pairs = hold.hold_margins_of_pairs(pts, nrm, rho, i, j, com, **kw)
+    assert 0 < np.sum(pairs >= 1) < len(i)  # some hold, some do not
+    np.testing.assert_array_equal(pairs, stacked)
+    with pytest.raises(ValueError, match="indices"):
+        hold.hold_margins_of_pairs(pts, nrm, rho, i, np.full_like(j, len(pts)), com, **kw)
+    with pytest.raises(ValueError, match="one row per point"):
+        hold.hold_margins_of_pairs(pts, nrm[:-1], rho, i, j, com, **kw)
+
+
 # -- known answers on real surfaces ------------------------------------------------------------------------------
 
 
