@@ -22,9 +22,10 @@ along its faces), so a load leaning further has tan(phi - theta) F left in the w
 is held when s |t_i| <= k_i mu F for both contacts and sum_i rho_i k_i mu F sqrt(1 - (s |t_i| / (k_i mu F))^2) >=
 s |moment about x|.
 The hold margin is the largest s that holds in every direction d (the ratio of the load the grasp resists to the
-load required); criterion (e) keeps margins >= 1. Directions: `HOLD.directions` on a half sphere (d and -d need the
-same), refined twice around the worst; the margin is exact for the directions tried and the continuous minimum
-lies within a fraction of a per cent of it (a check in tests/graspgen/test_hold.py).
+load required); criterion (e) keeps margins >= 1. Directions: `HOLD.directions` on a quarter sphere (d and -d need
+the same, and so do the two mirror images across the plane of the closing axis and the centre of mass), refined
+three times around the worst; the margin is exact for the directions tried and the continuous minimum lies within a
+fraction of a per cent of it (a check in tests/graspgen/test_hold.py).
 
 The patch of a sample point p with normal n: the sample points q under the pad's inscribed disc (radius
 min(finger_width, finger_depth) / 2 around p in the plane normal to n) that lie within `pad_compliance` of that
@@ -58,8 +59,10 @@ class HoldModel:
     patch_normal_deg: float = 20.0
     #: torsion radius of a point contact on a pad (a Hertz-like spot of about 1.5 mm)
     min_torsion_radius: float = 0.5e-3
-    #: load directions on the half sphere (then refined three times around the worst)
-    directions: int = 32
+    #: load directions on the quarter sphere (then refined three times around the worst): 24 there are as dense as
+    #: 48 on the half sphere (measured on the thick ring's 400,000 candidates against 2,048 directions: 0.46 % at
+    #: most above, 0.1 % at the 99th percentile; 32 on the half sphere before, 0.61 % and 0.05 %, took 20 % longer)
+    directions: int = 24
     #: bisection steps for a direction's limit scale (relative precision 2^-steps of the bracket)
     bisection_steps: int = 30
     #: margins are reported up to this value (a part with no load at all holds without limit)
@@ -180,11 +183,11 @@ def _tilt_kernel(C, N, mu, out):
             out[n, k] = _tilt(ax / w, ay / w, az / w, N[n, k, 0], N[n, k, 1], N[n, k, 2], phi, tan_phi)
 
 
-def _half_sphere(count: int) -> np.ndarray:
-    """`count` unit vectors spread evenly over the half sphere x >= 0 (a Fibonacci lattice), (count, 3)."""
+def _quarter_sphere(count: int) -> np.ndarray:
+    """`count` unit vectors spread evenly over the quarter sphere x >= 0, z >= 0 (a Fibonacci lattice), (count, 3)."""
     k = np.arange(count, dtype=np.float64) + 0.5
-    x = k / count  # uniform in [0, 1]: equal areas on the half sphere
-    phi = k * math.pi * (3.0 - math.sqrt(5.0))
+    x = k / count  # uniform in [0, 1]: equal areas
+    phi = np.mod(k * (math.sqrt(5.0) - 1.0) / 2.0, 1.0) * math.pi  # golden-ratio steps over the half turn
     s = np.sqrt(1.0 - x * x)
     return np.ascontiguousarray(np.stack([x, s * np.cos(phi), s * np.sin(phi)], axis=1))
 
@@ -280,7 +283,7 @@ def _margins(P, normals, rho, i, j, center_of_mass, load, grip_force, friction, 
         float(load),
         float(friction),
         float(friction) * float(grip_force),
-        _half_sphere(model.directions),
+        _quarter_sphere(model.directions),
         int(model.bisection_steps),
         float(model.max_margin),
         float(floor),
@@ -364,7 +367,7 @@ def _limit(best, a0, a1, b, c0, c1, inv_c, steps):
 def _margins_kernel(P, Nrm, rho, I, J, com, W, mu, cap, dirs, steps, max_margin, floor, out):
     K = dirs.shape[0]
     # refinement: around the worst direction, 8 neighbours at 1/2, 1/4 and 1/8 of the lattice spacing
-    spacing = np.sqrt(2.0 * np.pi / K)
+    spacing = np.sqrt(np.pi / K)
     ring_c = np.cos(np.arange(8) * np.pi / 4.0)
     ring_s = np.sin(np.arange(8) * np.pi / 4.0)
     w_cap = W / cap
@@ -421,26 +424,16 @@ def _margin_one(
     az = P[ib, 2] - P[ia, 2]
     w = np.sqrt(ax * ax + ay * ay + az * az)
     ax, ay, az = ax / w, ay / w, az / w
-    # any orthonormal (e1, e2) perpendicular to the axis: the model is symmetric about it
-    if abs(ax) < 0.9:
-        ux, uy, uz = 1.0, 0.0, 0.0
-    else:
-        ux, uy, uz = 0.0, 1.0, 0.0
-    e1x = uy * az - uz * ay
-    e1y = uz * ax - ux * az
-    e1z = ux * ay - uy * ax
-    l1 = np.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
-    e1x, e1y, e1z = e1x / l1, e1y / l1, e1z / l1
-    e2x = ay * e1z - az * e1y
-    e2y = az * e1x - ax * e1z
-    e2z = ax * e1y - ay * e1x
     mx = 0.5 * (P[ia, 0] + P[ib, 0])
     my = 0.5 * (P[ia, 1] + P[ib, 1])
     mz = 0.5 * (P[ia, 2] + P[ib, 2])
     qx, qy, qz = com[0] - mx, com[1] - my, com[2] - mz
     rx = qx * ax + qy * ay + qz * az
-    ry = qx * e1x + qy * e1y + qz * e1z
-    rz = qx * e2x + qy * e2y + qz * e2z
+    # the local y axis along the centre of mass's offset from the closing axis (rz = 0): the model is symmetric
+    # about the closing axis, and in this frame also under dz -> -dz, so directions with dz >= 0 suffice
+    px, py, pz = qx - rx * ax, qy - rx * ay, qz - rx * az
+    ry = np.sqrt(px * px + py * py + pz * pz)
+    rz = 0.0
     inv_h = 2.0 / w
     c0 = cap * k0 * rho0
     c1 = cap * k1 * rho1
