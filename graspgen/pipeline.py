@@ -27,8 +27,12 @@ __all__ = ["generate", "recluster", "STAGES", "MAX_CANDIDATES", "choose_roll"]
 
 #: the stages reported to progress callbacks, in order ("validate" only with validate=True)
 STAGES = ("load", "sample", "pairs", "collision", "cluster", "validate", "export")
-#: the collision stage reports progress at least this many times
+#: the collision stage reports progress (and so sees a cancel) after its first tenth of the pairs, then about every
+#: _COLLISION_REPORT_S seconds: each report ends a call of the parallel kernel, whose threads wait for the slowest
+#: at its end, so a report per tenth cost the thick ring about 0.1 s of its 1 s
 _COLLISION_BATCHES = 10
+_COLLISION_REPORT_S = 0.5
+_MIN_SEGMENT = 4096
 #: pairs passing (a)-(c) are made and collision-checked this many at a time (about 120 bytes each while in flight),
 #: so memory is bounded by the candidates that survive, not by the pairs: at 10,000 points one block holds them all
 _PAIR_BLOCK = 4_000_000
@@ -303,8 +307,7 @@ def _collide(run: _Run, surface: _Surface, pairs: _Pairs) -> _Collided:
     plan, rolls = pairs.plan, run.params.rolls
     pts, nrm = surface.points, surface.normals
     m = plan.accepted
-    # progress (and a cancel) at least every m / _COLLISION_BATCHES pairs, within the longest stage
-    step = max(-(-m // _COLLISION_BATCHES), 1)
+    segment = max(-(-m // _COLLISION_BATCHES), 1)  # pairs per kernel call, then set by the measured rate
     kept: list[_Survivors] = []
     n_kept = 0
     n_tolerance = 0
@@ -322,13 +325,17 @@ def _collide(run: _Run, surface: _Surface, pairs: _Pairs) -> _Collided:
                 bi, bj, bins, pos = bi[ok], bj[ok], bins[ok], pos[ok]
         t_fill += time.perf_counter() - t0
         t0 = time.perf_counter()
-        free = np.zeros((len(bi), rolls), dtype=bool)
-        # segment boundaries: the block's ends and every multiple of `step` inside it
-        cuts = np.unique(np.r_[0, np.searchsorted(pos, np.arange(-p0 % step, block, step)), len(bi)])
-        for lo, hi in zip(cuts[:-1], cuts[1:], strict=True):
-            sl = slice(int(lo), int(hi))
+        free = np.empty((len(bi), rolls), dtype=bool)
+        lo = 0
+        while lo < len(bi):
+            hi = min(lo + segment, len(bi))
+            sl = slice(lo, hi)
+            t_seg = time.perf_counter()
             free[sl] = _collision.free_rolls_of_pairs(pts, bi[sl], bj[sl], bins[sl], pairs.model, rolls, normals=nrm)
+            rate = (hi - lo) / max(time.perf_counter() - t_seg, 1e-6)
+            segment = max(int(rate * _COLLISION_REPORT_S), _MIN_SEGMENT)
             run.report("collision", (p0 + (block if hi == len(bi) else int(pos[hi]))) / m)
+            lo = hi
         if len(bi) == 0 and m:
             run.report("collision", (p0 + block) / m)
         block_kept = _Survivors(bi, bj, free, bins).keep(free.any(axis=1))

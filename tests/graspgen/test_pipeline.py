@@ -334,6 +334,25 @@ def test_streaming_pairs_through_collision_in_blocks_changes_nothing(monkeypatch
     assert len(coll) >= 11 and coll == sorted(coll) and coll[-1] == 1.0
 
 
+def test_collision_reports_by_time_and_segments_change_nothing(monkeypatch):
+    """The collision kernel runs in segments sized by its measured rate (a report about every _COLLISION_REPORT_S
+    seconds): at a report interval of 0 every segment is the smallest, the reports come in order, and the
+    candidates are the very same as in one call."""
+    import graspgen.pipeline as pipeline
+
+    kw = dict(units="m", points=600, k1=4, k2=2)
+    whole = graspgen.generate(_box(), GRIPPER, **kw)
+    monkeypatch.setattr(pipeline, "_COLLISION_REPORT_S", 0.0)
+    monkeypatch.setattr(pipeline, "_MIN_SEGMENT", 100)
+    seen = []
+    cut = graspgen.generate(_box(), GRIPPER, progress=lambda s, f: seen.append((s, f)), **kw)
+    coll = [f for s, f in seen if s == "collision"]
+    # the first tenth in one call, then 100 pairs per call: several times the ten reports of a tenth each
+    assert len(coll) > 3 * pipeline._COLLISION_BATCHES and coll == sorted(coll) and coll[-1] == 1.0
+    for name in ("contacts", "free_rolls", "labels", "medoids"):
+        assert np.array_equal(getattr(whole.candidates, name), getattr(cut.candidates, name)), name
+
+
 def test_a_point_cloud_is_validated_as_the_convex_hull_of_its_points(monkeypatch):
     from graspgen import physics
 
