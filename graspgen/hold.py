@@ -24,7 +24,7 @@ s |moment about x|.
 The hold margin is the largest s that holds in every direction d (the ratio of the load the grasp resists to the
 load required); criterion (e) keeps margins >= 1. Directions: `HOLD.directions` on a quarter sphere (d and -d need
 the same, and so do the two mirror images across the plane of the closing axis and the centre of mass), refined
-three times around the worst; the margin is exact for the directions tried and the continuous minimum lies within a
+twice around the worst; the margin is exact for the directions tried and the continuous minimum lies within a
 fraction of a per cent of it (a check in tests/graspgen/test_hold.py).
 
 The patch of a sample point p with normal n: the sample points q under the pad's inscribed disc (radius
@@ -59,10 +59,14 @@ class HoldModel:
     patch_normal_deg: float = 20.0
     #: torsion radius of a point contact on a pad (a Hertz-like spot of about 1.5 mm)
     min_torsion_radius: float = 0.5e-3
-    #: load directions on the quarter sphere (then refined three times around the worst): 24 there are as dense as
-    #: 48 on the half sphere (measured on the thick ring's 400,000 candidates against 2,048 directions: 0.46 % at
-    #: most above, 0.1 % at the 99th percentile; 32 on the half sphere before, 0.61 % and 0.05 %, took 20 % longer)
-    directions: int = 24
+    #: load directions on the quarter sphere (then refined around the worst): 28 there are as dense as 56 on the
+    #: half sphere. Measured on the thick ring's 400,000 candidates against 2,048 directions: at most 0.35 % above,
+    #: 0.09 % at the 99th percentile, kernel 0.34 s; 32 on the half sphere with three refinements before: 0.61 %,
+    #: 0.05 %, 0.48 s (the largest errors are basins the lattice misses, which a third round does not mend;
+    #: bench/bench_hold_margin.py)
+    directions: int = 28
+    #: refinement rounds: 8 neighbours of the worst direction at 1/2, then 1/4 ... of the lattice spacing
+    refinements: int = 2
     #: bisection steps for a direction's limit scale (relative precision 2^-steps of the bracket)
     bisection_steps: int = 30
     #: margins are reported up to this value (a part with no load at all holds without limit)
@@ -285,6 +289,7 @@ def _margins(P, normals, rho, i, j, center_of_mass, load, grip_force, friction, 
         float(friction) * float(grip_force),
         _quarter_sphere(model.directions),
         int(model.bisection_steps),
+        int(model.refinements),
         float(model.max_margin),
         float(floor),
         out,
@@ -364,9 +369,9 @@ def _limit(best, a0, a1, b, c0, c1, inv_c, steps):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _margins_kernel(P, Nrm, rho, I, J, com, W, mu, cap, dirs, steps, max_margin, floor, out):
+def _margins_kernel(P, Nrm, rho, I, J, com, W, mu, cap, dirs, steps, refinements, max_margin, floor, out):
     K = dirs.shape[0]
-    # refinement: around the worst direction, 8 neighbours at 1/2, 1/4 and 1/8 of the lattice spacing
+    # refinement: around the worst direction, 8 neighbours at 1/2, 1/4, ... of the lattice spacing
     spacing = np.sqrt(np.pi / K)
     ring_c = np.cos(np.arange(8) * np.pi / 4.0)
     ring_s = np.sin(np.arange(8) * np.pi / 4.0)
@@ -402,6 +407,7 @@ def _margins_kernel(P, Nrm, rho, I, J, com, W, mu, cap, dirs, steps, max_margin,
                 cap,
                 dirs,
                 steps,
+                refinements,
                 max_margin,
                 floor,
                 co,
@@ -414,7 +420,26 @@ def _margins_kernel(P, Nrm, rho, I, J, com, W, mu, cap, dirs, steps, max_margin,
 
 @njit(cache=True, error_model="numpy")
 def _margin_one(
-    P, ia, ib, rho0, rho1, k0, k1, com, W, cap, dirs, steps, max_margin, floor, co, spacing, ring_c, ring_s, w_cap
+    P,
+    ia,
+    ib,
+    rho0,
+    rho1,
+    k0,
+    k1,
+    com,
+    W,
+    cap,
+    dirs,
+    steps,
+    refinements,
+    max_margin,
+    floor,
+    co,
+    spacing,
+    ring_c,
+    ring_s,
+    w_cap,
 ):
     K = dirs.shape[0]
     if k0 <= 0.0 or k1 <= 0.0:  # a contact on the cone's edge has no friction left for any load
@@ -463,7 +488,7 @@ def _margin_one(
                     break
     dx, dy, dz = dirs[worst, 0], dirs[worst, 1], dirs[worst, 2]
     step = 0.5 * spacing
-    for _ in range(3):
+    for _ in range(refinements):
         if best < floor:
             break
         # two tangent vectors at d
