@@ -17,7 +17,7 @@ from services.common.tokens import TokenStore
 from services.worker.dispatch import Dispatcher, EmbeddedDispatcher, make_dispatcher
 
 from . import observability
-from .http import BlobCache
+from .http import BlobCache, HeadMiddleware
 from .limits import MULTIPART_OVERHEAD, BodyLimitMiddleware
 from .openapi_docs import document_contract
 from .problems import install_problem_handlers, problem_schema
@@ -100,6 +100,7 @@ def create_app(
         app.include_router(r)
     previews.install(app, settings)
     observability.install(app, settings, dispatcher)  # request ids, /metrics, rate limits (issue 16)
+    app.add_middleware(HeadMiddleware)  # outside request ids, metrics and rate limits: they count a HEAD as a GET
     app.add_middleware(
         BodyLimitMiddleware,
         default_limit=settings.max_json_bytes,

@@ -1,16 +1,26 @@
-"""Conditional requests and artifact responses (strong ETags, immutable caching)."""
+"""Conditional requests and artifact responses (strong ETags, immutable caching), and HEAD for every GET."""
 
 from __future__ import annotations
 
 from fastapi import Request, Response
 from fastapi.responses import StreamingResponse
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from services.common.storage import Storage
 
 from .cache import SizedLRU
 from .problems import ApiError
 
-__all__ = ["BlobCache", "IMMUTABLE", "REVALIDATE", "not_modified", "etag_matches", "blob_response", "blob_etag"]
+__all__ = [
+    "BlobCache",
+    "HeadMiddleware",
+    "IMMUTABLE",
+    "REVALIDATE",
+    "not_modified",
+    "etag_matches",
+    "blob_response",
+    "blob_etag",
+]
 
 IMMUTABLE = "private, max-age=31536000, immutable"
 REVALIDATE = "private, no-cache"
@@ -78,3 +88,27 @@ class BlobCache:
             data = self.storage.get_bytes(key)
             self._lru.put(key, data, len(data))
         return data
+
+
+class HeadMiddleware:
+    """HEAD answered as GET without the body (RFC 9110 9.3.2: the same status and headers, Content-Length and ETag
+    included), so a client can check a catalogue entry's ETag or an artifact's size without downloading it. The
+    route runs as a GET (auth, rate limits and metrics count it as one); a path without GET still answers 405 with
+    its Allow header."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http" or scope.get("method") != "HEAD":
+            await self.app(scope, receive, send)
+            return
+
+        async def send_headers_only(message: Message) -> None:
+            if message["type"] == "http.response.body":
+                if message.get("more_body", False):
+                    return  # the rest of a streamed body: dropped
+                message = {"type": "http.response.body", "body": b"", "more_body": False}
+            await send(message)
+
+        await self.app({**scope, "method": "GET"}, receive, send_headers_only)

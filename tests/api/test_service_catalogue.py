@@ -80,3 +80,25 @@ def test_grasp_sets_list_pages_newest_first_and_filters(pg_service):
     assert v3.headers["content-location"] == f"/v1/grasp-sets/{ids[2]}"
     assert pg_service.get(f"/v1/catalogue/{obj}/{grip}?version=9").status_code == 404
     assert pg_service.get(f"/v1/catalogue/{obj}/no-such-gripper").status_code == 404
+
+
+def test_head_answers_as_get_without_the_body(pg_service):
+    """HEAD on a GET route: the GET's status and headers (ETag, Content-Length, the catalogue's Graspgen-*), no
+    body; a conditional HEAD gives 304; a path without GET answers 405 with Allow, as a problem."""
+    grip = slug("head")
+    name = slug("h")
+    seed_grasp_sets(pg_service, grip, [name])
+    url = f"/v1/catalogue/{name}/{grip}"
+    got = pg_service.get(url)
+    head = pg_service.client.head(url, headers=pg_service.h("reader"))
+    assert got.status_code == head.status_code == 200 and head.content == b""
+    for key in ("etag", "content-length", "content-type", "graspgen-set-id", "graspgen-released", "graspgen-stale"):
+        assert head.headers[key] == got.headers[key], key
+    assert int(head.headers["content-length"]) == len(got.content) > 0
+    cond = pg_service.client.head(url, headers=pg_service.h("reader", **{"If-None-Match": got.headers["etag"]}))
+    assert cond.status_code == 304 and cond.content == b""
+    assert pg_service.client.head(url).status_code == 401  # auth as for GET
+    missing = pg_service.client.head(f"/v1/catalogue/{slug('none')}/{grip}", headers=pg_service.h("reader"))
+    assert missing.status_code == 404 and missing.content == b""
+    post_only = pg_service.client.head("/v1/pick", headers=pg_service.h("reader"))
+    assert post_only.status_code == 405 and post_only.headers["allow"] == "POST"
