@@ -19,7 +19,7 @@ from .coverage import coverage
 from .errors import InvalidParameterError, InvalidUnitsError
 from .export import Candidates, GraspSet
 from .gripper import GripperSpec
-from .params import Params, QualityOptions
+from .params import REPAIR_LIMIT, Params, QualityOptions
 from .parts import Part, load_part
 from .transforms import grasp_frames, roll_angles_rad
 
@@ -72,7 +72,7 @@ def generate(
     accel: float = 9.81,
     hold: str = "any",
     position_tolerance: float = 0.001,
-    repair_limit: int = 4,
+    repair_limit: int = REPAIR_LIMIT,
     sim_workers: int | None = None,
 ) -> GraspSet:
     """Grasps for one part and one gripper (see CONTRACT.md, Python API).
@@ -573,7 +573,7 @@ def recluster(
     validate: bool = False,
     mass_kg: float | None = None,
     density: float | None = None,
-    repair_limit: int = 4,
+    repair_limit: int = REPAIR_LIMIT,
     sim_workers: int | None = None,
     mesh: str | os.PathLike | trimesh.Trimesh | Part | None = None,
     units: str | None = None,
