@@ -28,8 +28,8 @@ __all__ = ["generate", "recluster", "STAGES", "MAX_CANDIDATES", "choose_roll"]
 #: the stages reported to progress callbacks, in order ("validate" only with validate=True)
 STAGES = ("load", "sample", "pairs", "collision", "cluster", "validate", "export")
 #: the collision stage reports progress (and so sees a cancel) after its first tenth of the pairs, then about every
-#: _COLLISION_REPORT_S seconds: each report ends a call of the parallel kernel, whose threads wait for the slowest
-#: at its end, so a report per tenth cost the thick ring about 0.1 s of its 1 s
+#: _COLLISION_REPORT_S seconds. Each report ends a call of the parallel kernel (its threads wait for the slowest):
+#: a report per tenth made ten calls of a short stage and left a cancel waiting a tenth of a long one
 _COLLISION_BATCHES = 10
 _COLLISION_REPORT_S = 0.5
 _MIN_SEGMENT = 4096
