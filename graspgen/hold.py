@@ -375,7 +375,7 @@ def _margins_kernel(P, Nrm, rho, I, J, com, W, mu, cap, dirs, steps, refinements
     spacing = np.sqrt(np.pi / K)
     ring_c = np.cos(np.arange(8) * np.pi / 4.0)
     ring_s = np.sin(np.arange(8) * np.pi / 4.0)
-    w_cap = W / cap
+    run = (W, cap, W / cap, max_margin, floor, spacing)
     phi = math.atan(mu)
     tan_phi = math.tan(phi)
     tilted = Nrm.shape[0] > 0
@@ -395,52 +395,15 @@ def _margins_kernel(P, Nrm, rho, I, J, com, W, mu, cap, dirs, steps, refinements
                 k0 = _tilt(ax, ay, az, Nrm[a, 0], Nrm[a, 1], Nrm[a, 2], phi, tan_phi)
                 k1 = _tilt(ax, ay, az, Nrm[b, 0], Nrm[b, 1], Nrm[b, 2], phi, tan_phi)
             out[n] = _margin_one(
-                P,
-                a,
-                b,
-                rho[a],
-                rho[b],
-                k0,
-                k1,
-                com,
-                W,
-                cap,
-                dirs,
-                steps,
-                refinements,
-                max_margin,
-                floor,
-                co,
-                spacing,
-                ring_c,
-                ring_s,
-                w_cap,
+                P, a, b, rho[a], rho[b], k0, k1, com, dirs, co, ring_c, ring_s, steps, refinements, run
             )
 
 
 @njit(cache=True, error_model="numpy")
-def _margin_one(
-    P,
-    ia,
-    ib,
-    rho0,
-    rho1,
-    k0,
-    k1,
-    com,
-    W,
-    cap,
-    dirs,
-    steps,
-    refinements,
-    max_margin,
-    floor,
-    co,
-    spacing,
-    ring_c,
-    ring_s,
-    w_cap,
-):
+def _margin_one(P, ia, ib, rho0, rho1, k0, k1, com, dirs, co, ring_c, ring_s, steps, refinements, run):
+    """The margin of the candidate (P[ia], P[ib]) with torsion radii rho0, rho1 and tilt factors k0, k1; `run`: the
+    load W, mu F, W / (mu F), max_margin, floor and the lattice spacing (the same for every candidate)."""
+    W, cap, w_cap, max_margin, floor, spacing = run
     K = dirs.shape[0]
     if k0 <= 0.0 or k1 <= 0.0:  # a contact on the cone's edge has no friction left for any load
         return 0.0
