@@ -375,43 +375,34 @@ def _margins_kernel(P, Nrm, rho, I, J, com, W, mu, cap, dirs, steps, refinements
     spacing = np.sqrt(np.pi / K)
     ring_c = np.cos(np.arange(8) * np.pi / 4.0)
     ring_s = np.sin(np.arange(8) * np.pi / 4.0)
-    run = (W, cap, W / cap, max_margin, floor, spacing)
     phi = math.atan(mu)
-    tan_phi = math.tan(phi)
-    tilted = Nrm.shape[0] > 0
+    run = (W, cap, W / cap, max_margin, floor, spacing, phi, math.tan(phi))
     N = I.shape[0]
     chunks = (N + _CHUNK - 1) // _CHUNK
     for ch in prange(chunks):
         co = np.empty((K, 3))
         for n in range(ch * _CHUNK, min(N, (ch + 1) * _CHUNK)):
-            a, b = I[n], J[n]
-            k0 = k1 = 1.0
-            if tilted:
-                ax = P[b, 0] - P[a, 0]
-                ay = P[b, 1] - P[a, 1]
-                az = P[b, 2] - P[a, 2]
-                w = max(np.sqrt(ax * ax + ay * ay + az * az), 1e-300)
-                ax, ay, az = ax / w, ay / w, az / w
-                k0 = _tilt(ax, ay, az, Nrm[a, 0], Nrm[a, 1], Nrm[a, 2], phi, tan_phi)
-                k1 = _tilt(ax, ay, az, Nrm[b, 0], Nrm[b, 1], Nrm[b, 2], phi, tan_phi)
-            out[n] = _margin_one(
-                P, a, b, rho[a], rho[b], k0, k1, com, dirs, co, ring_c, ring_s, steps, refinements, run
-            )
+            out[n] = _margin_one(P, Nrm, I[n], J[n], rho, com, dirs, co, ring_c, ring_s, steps, refinements, run)
 
 
 @njit(cache=True, error_model="numpy")
-def _margin_one(P, ia, ib, rho0, rho1, k0, k1, com, dirs, co, ring_c, ring_s, steps, refinements, run):
-    """The margin of the candidate (P[ia], P[ib]) with torsion radii rho0, rho1 and tilt factors k0, k1; `run`: the
-    load W, mu F, W / (mu F), max_margin, floor and the lattice spacing (the same for every candidate)."""
-    W, cap, w_cap, max_margin, floor, spacing = run
+def _margin_one(P, Nrm, ia, ib, rho, com, dirs, co, ring_c, ring_s, steps, refinements, run):
+    """The margin of the candidate (P[ia], P[ib]) with the points' normals Nrm (none: both on the closing axis) and
+    torsion radii rho; `run`: the load W, mu F, W / (mu F), max_margin, floor, the lattice spacing, atan(mu) and its
+    tangent (the same for every candidate)."""
+    W, cap, w_cap, max_margin, floor, spacing, phi, tan_phi = run
     K = dirs.shape[0]
-    if k0 <= 0.0 or k1 <= 0.0:  # a contact on the cone's edge has no friction left for any load
-        return 0.0
     ax = P[ib, 0] - P[ia, 0]
     ay = P[ib, 1] - P[ia, 1]
     az = P[ib, 2] - P[ia, 2]
     w = np.sqrt(ax * ax + ay * ay + az * az)
     ax, ay, az = ax / w, ay / w, az / w
+    k0 = k1 = 1.0
+    if Nrm.shape[0] > 0:
+        k0 = _tilt(ax, ay, az, Nrm[ia, 0], Nrm[ia, 1], Nrm[ia, 2], phi, tan_phi)
+        k1 = _tilt(ax, ay, az, Nrm[ib, 0], Nrm[ib, 1], Nrm[ib, 2], phi, tan_phi)
+    if k0 <= 0.0 or k1 <= 0.0:  # a contact on the cone's edge has no friction left for any load
+        return 0.0
     mx = 0.5 * (P[ia, 0] + P[ib, 0])
     my = 0.5 * (P[ia, 1] + P[ib, 1])
     mz = 0.5 * (P[ia, 2] + P[ib, 2])
@@ -423,8 +414,8 @@ def _margin_one(P, ia, ib, rho0, rho1, k0, k1, com, dirs, co, ring_c, ring_s, st
     ry = np.sqrt(px * px + py * py + pz * pz)
     rz = 0.0
     inv_h = 2.0 / w
-    c0 = cap * k0 * rho0
-    c1 = cap * k1 * rho1
+    c0 = cap * k0 * rho[ia]
+    c1 = cap * k1 * rho[ib]
     # the tangential loads over each contact's own capacity mu F k: a0 and a1 of _coeffs divided by k
     w_cap0 = w_cap / k0
     w_cap1 = w_cap / k1
