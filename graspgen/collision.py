@@ -319,9 +319,14 @@ def _basis(ax, ay, az, switch):
     return yx, yy, yz, zx, zy, zz
 
 
+def _x_range_constants(model: CollisionModel) -> np.ndarray:
+    """`model_f` of _x_ranges: (finger thickness, stroke, min_width, clearance, inner margin)."""
+    return np.array([model.finger_thickness, model.stroke, model.min_width, model.clearance, model.inner_margin])
+
+
 @njit(cache=True, inline="always", error_model="numpy")
 def _x_ranges(xr, kind_inside, w, model_f):
-    """Finger x intervals for one candidate into xr[0:2]; model_f = (t, stroke, min_width, clearance, margin)."""
+    """Finger x intervals for one candidate into xr[0:2]; model_f = _x_range_constants(model)."""
     t, stroke, min_width, clearance, margin = model_f[0], model_f[1], model_f[2], model_f[3], model_f[4]
     if not kind_inside:
         o = min(w + clearance, stroke)
@@ -994,7 +999,7 @@ def _prepare(points, normals, model, rolls):
         # |y(k + half) + y(k)| <= (|y0| + |z0|) asym + rounding <= r (2 asym + 16 eps), doubled for safety
         gfac = 2.0 * (2.0 * asym + 16.0 * np.finfo(np.float64).eps)
     full = np.uint64((1 << rolls) - 1) if rolls < 64 else np.uint64(0xFFFFFFFFFFFFFFFF)
-    model_f = np.array([model.finger_thickness, model.stroke, model.min_width, model.clearance, model.inner_margin])
+    model_f = _x_range_constants(model)
     soa = tuple(np.ascontiguousarray(Ps[:, k]) for k in range(3))
     # memo cells _MEMO_H leaf patches wide, at most _MEMO_CELLS of them
     lo = P.min(axis=0)

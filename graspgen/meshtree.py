@@ -44,7 +44,7 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from .collision import CollisionModel, _basis, _regions, _x_ranges
+from .collision import CollisionModel, _basis, _regions, _x_range_constants, _x_ranges
 
 __all__ = ["MeshTree", "build_tree", "normal_spread_rad", "mesh_free_rolls"]
 
@@ -356,7 +356,7 @@ def mesh_free_rolls(
     if n == 0 or len(tree) == 0:
         return out
     reg = _regions(model)
-    model_f = np.array([model.finger_thickness, model.stroke, model.min_width, model.clearance, model.inner_margin])
+    model_f = _x_range_constants(model)
     psi = 2.0 * np.pi * np.arange(R) / R
     # the node tests' guard band: far beyond the rounding of the boxes' bounds and of the tests themselves
     guard = 1e-9 * 2.0 * float(np.max(tree.nodes[0, 4:7])) + 1e-15
@@ -544,11 +544,28 @@ def _walk(F, todo, T, nodes, children, reg, rx, boxes_c, boxes_e, rot, cos_k, si
     return blocked
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _region_boxes(xr, reg, rx, boxes_c, boxes_e):
+    """The regions' boxes in a roll's grasp frame for one candidate: x ranges into rx (r, 2), centres and half
+    extents into boxes_c, boxes_e (r, 3); xr: the fingers' x ranges (_x_ranges), reg: _regions."""
+    for r in range(reg.shape[0]):
+        if r < 2:
+            lo_x, hi_x = xr[r, 0], xr[r, 1]
+        else:
+            lo_x, hi_x = -reg[r, 10], reg[r, 10]
+        rx[r, 0], rx[r, 1] = lo_x, hi_x
+        boxes_c[r, 0] = 0.5 * (lo_x + hi_x)
+        boxes_e[r, 0] = 0.5 * (hi_x - lo_x)
+        boxes_c[r, 1] = 0.0
+        boxes_e[r, 1] = reg[r, 0]
+        boxes_c[r, 2] = 0.5 * (reg[r, 1] + reg[r, 2])
+        boxes_e[r, 2] = 0.5 * (reg[r, 2] - reg[r, 1])
+
+
 @njit(parallel=True, cache=True, error_model="numpy")
 def _mesh_kernel(M, A, Wd, inside, free, T, nodes, children, reg, model_f, cos_k, sin_k, switch, g, nthreads):
     n = M.shape[0]
     R = cos_k.shape[0]
-    nreg = reg.shape[0]
     chunks = (n + _CHUNK - 1) // _CHUNK
     # thread t takes chunks t, t + T, ...: the work varies along the candidates' spatial order, and a static split
     # into one run per thread left one thread with 60 % of it (tless_04), as in collision._free_rolls_kernel
@@ -578,19 +595,7 @@ def _mesh_kernel(M, A, Wd, inside, free, T, nodes, children, reg, model_f, cos_k
                     rot[rl, 0], rot[rl, 1], rot[rl, 2] = c * yx + s * zx, c * yy + s * zy, c * yz + s * zz
                     rot[rl, 3], rot[rl, 4], rot[rl, 5] = -s * yx + c * zx, -s * yy + c * zy, -s * yz + c * zz
                 _x_ranges(xr, inside[i], Wd[i], model_f)
-                # the boxes in the roll's grasp frame (centre, half extents) and their x ranges
-                for r in range(nreg):
-                    if r < 2:
-                        lo_x, hi_x = xr[r, 0], xr[r, 1]
-                    else:
-                        lo_x, hi_x = -reg[r, 10], reg[r, 10]
-                    rx[r, 0], rx[r, 1] = lo_x, hi_x
-                    boxes_c[r, 0] = 0.5 * (lo_x + hi_x)
-                    boxes_e[r, 0] = 0.5 * (hi_x - lo_x)
-                    boxes_c[r, 1] = 0.0
-                    boxes_e[r, 1] = reg[r, 0]
-                    boxes_c[r, 2] = 0.5 * (reg[r, 1] + reg[r, 2])
-                    boxes_e[r, 2] = 0.5 * (reg[r, 2] - reg[r, 1])
+                _region_boxes(xr, reg, rx, boxes_c, boxes_e)
                 F[0], F[1], F[2] = M[i, 0], M[i, 1], M[i, 2]
                 F[3], F[4], F[5], F[6], F[7], F[8], F[9], F[10], F[11] = ax, ay, az, yx, yy, yz, zx, zy, zz
                 blocked = _walk(

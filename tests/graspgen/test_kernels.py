@@ -410,27 +410,26 @@ def _mesh_free_rolls_brute(tree, mids, axes, widths, inside, model, rolls):
     own arithmetic (the roll-0 frame, the rotation per roll, the separating-axis test)."""
     from numba import njit
 
-    from graspgen.collision import _basis, _regions, _x_ranges
-    from graspgen.meshtree import _tri_box
+    from graspgen.collision import _basis, _regions, _x_range_constants, _x_ranges
+    from graspgen.meshtree import _region_boxes, _tri_box
     from graspgen.transforms import ROLL_REFERENCE_SWITCH
 
     @njit(cache=False)
     def brute(M, A, Wd, ins, T, reg, model_f, cos_k, sin_k, switch, out):
         R = cos_k.shape[0]
         xr = np.empty((3, 2))
-        bc = np.empty(3)
-        be = np.empty(3)
+        rx = np.empty((3, 2))
+        boxes_c = np.empty((3, 3))
+        boxes_e = np.empty((3, 3))
         v = np.empty((3, 3))
         w = np.empty((3, 3))
         for i in range(M.shape[0]):
             ax, ay, az = A[i, 0], A[i, 1], A[i, 2]
             yx, yy, yz, zx, zy, zz = _basis(ax, ay, az, switch)
             _x_ranges(xr, ins[i], Wd[i], model_f)
+            _region_boxes(xr, reg, rx, boxes_c, boxes_e)
             for r in range(reg.shape[0]):
-                lo_x, hi_x = (xr[r, 0], xr[r, 1]) if r < 2 else (-reg[r, 10], reg[r, 10])
-                bc[0], be[0] = 0.5 * (lo_x + hi_x), 0.5 * (hi_x - lo_x)
-                bc[1], be[1] = 0.0, reg[r, 0]
-                bc[2], be[2] = 0.5 * (reg[r, 1] + reg[r, 2]), 0.5 * (reg[r, 2] - reg[r, 1])
+                bc, be = boxes_c[r], boxes_e[r]
                 for t in range(T.shape[0]):
                     for c in range(3):
                         px, py, pz = T[t, c, 0] - M[i, 0], T[t, c, 1] - M[i, 1], T[t, c, 2] - M[i, 2]
@@ -448,7 +447,6 @@ def _mesh_free_rolls_brute(tree, mids, axes, widths, inside, model, rolls):
 
     out = np.ones((len(mids), rolls), dtype=bool)
     psi = 2.0 * np.pi * np.arange(rolls) / rolls
-    model_f = np.array([model.finger_thickness, model.stroke, model.min_width, model.clearance, model.inner_margin])
     brute(
         mids,
         axes,
@@ -456,7 +454,7 @@ def _mesh_free_rolls_brute(tree, mids, axes, widths, inside, model, rolls):
         inside,
         tree.triangles,
         _regions(model),
-        model_f,
+        _x_range_constants(model),
         np.cos(psi),
         np.sin(psi),
         ROLL_REFERENCE_SWITCH,
