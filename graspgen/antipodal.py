@@ -7,7 +7,10 @@ ever built. Contact 0 is the point with the smaller index; the closing axis runs
 Outside grasp: the fingers close from outside, so each normal points away from the other contact
 (n0 . d < 0 < n1 . d, d = p1 - p0). Inside grasp (optional): the fingers sit between the contacts and open
 outwards, so the normals face each other (n0 . d > 0 > n1 . d). Friction: the finger force is along the closing
-axis, so the angle between the axis and each (inward) normal must stay within arctan(mu) / safety_factor.
+axis, so the angle between the axis and each (inward) normal must stay within arctan(mu) / safety_factor. With a
+position tolerance (a per-point `spread`: the largest angle between the point's normal and a surface normal within
+the tolerance), (c) holds for every such normal: contact angle + spread <= the half-angle, i.e. a per-point cone
+cos(half - spread), judged in the same pass.
 """
 
 from __future__ import annotations
@@ -76,8 +79,9 @@ def _grid(points: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np.n
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _judge(X, Y, Z, NX, NY, NZ, i, j, lims, inside_ok):
-    """(accepted, bad orientation, passes (a) and (b), inside) for the pair (i, j); branch-free."""
+def _judge(X, Y, Z, NX, NY, NZ, C2, i, j, lims, inside_ok):
+    """(accepted, bad orientation, passes (a) and (b), inside, passes (c) without the tolerance) for the pair
+    (i, j); branch-free. C2: per point, cos^2 of its cone within the position tolerance (cos2 where no spread)."""
     lo2, hi2, out_lo2, out_hi2, in_lo2, in_hi2, cos2 = lims[0], lims[1], lims[2], lims[3], lims[4], lims[5], lims[6]
     dx = X[j] - X[i]
     dy = Y[j] - Y[i]
@@ -92,22 +96,27 @@ def _judge(X, Y, Z, NX, NY, NZ, i, j, lims, inside_ok):
     ab_out = o_out & (d2 <= out_hi2) & (d2 >= out_lo2)
     ab_in = o_in & (d2 <= in_hi2) & (d2 >= in_lo2)
     pass_ab = in_range & (ab_out | ab_in)
-    acc = pass_ab & (u * u >= lim) & (v * v >= lim)
-    return acc, in_range & ~(o_out | o_in), pass_ab, ab_in
+    u2 = u * u
+    v2 = v * v
+    acc_c = pass_ab & (u2 >= lim) & (v2 >= lim)
+    acc = acc_c & (u2 >= C2[i] * d2) & (v2 >= C2[j] * d2)
+    return acc, in_range & ~(o_out | o_in), pass_ab, ab_in, acc_c
 
 
 @njit(cache=True, error_model="numpy")
-def _count_run(X, Y, Z, NX, NY, NZ, i, start, stop, lims, inside_ok):
+def _count_run(X, Y, Z, NX, NY, NZ, C2, i, start, stop, lims, inside_ok):
     # no stores in this loop, so that it vectorises
     n_acc = 0
     n_bad = 0
     n_ab = 0
+    n_c = 0
     for j in range(start, stop):
-        acc, bad, ab, _ = _judge(X, Y, Z, NX, NY, NZ, i, j, lims, inside_ok)
+        acc, bad, ab, _, acc_c = _judge(X, Y, Z, NX, NY, NZ, C2, i, j, lims, inside_ok)
         n_acc += acc
         n_bad += bad
         n_ab += ab
-    return n_acc, n_bad, n_ab
+        n_c += acc_c
+    return n_acc, n_bad, n_ab, n_c
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -119,7 +128,7 @@ def _popcount(v):
 
 
 @njit(cache=True, error_model="numpy")
-def _fill_run(X, Y, Z, NX, NY, NZ, i, start, stop, lims, inside_ok, out_j, out_inside, pos, end):
+def _fill_run(X, Y, Z, NX, NY, NZ, C2, i, start, stop, lims, inside_ok, out_j, out_inside, pos, end):
     # 64 pairs at a time: their verdicts packed into a word by a branch-free (vectorised) loop, then the few
     # accepted ones (~3 %) stored in order. The row's count is known from the counting pass: stop at `end`
     for b0 in range(start, stop, 64):
@@ -128,7 +137,7 @@ def _fill_run(X, Y, Z, NX, NY, NZ, i, start, stop, lims, inside_ok, out_j, out_i
         acc_w = np.uint64(0)
         ins_w = np.uint64(0)
         for t in range(min(64, stop - b0)):
-            acc, _, _, ins = _judge(X, Y, Z, NX, NY, NZ, i, b0 + t, lims, inside_ok)
+            acc, _, _, ins, _ = _judge(X, Y, Z, NX, NY, NZ, C2, i, b0 + t, lims, inside_ok)
             acc_w |= np.uint64(acc) << np.uint64(t)
             ins_w |= np.uint64(ins) << np.uint64(t)
         while acc_w:
@@ -148,6 +157,7 @@ def _pairs_kernel(
     NX,
     NY,
     NZ,
+    C2,
     cell_start,
     dims,
     origin,
@@ -177,6 +187,7 @@ def _pairs_kernel(
                 NX,
                 NY,
                 NZ,
+                C2,
                 cell_start,
                 dims,
                 origin,
@@ -202,6 +213,7 @@ def _pairs_row(
     NX,
     NY,
     NZ,
+    C2,
     cell_start,
     dims,
     origin,
@@ -223,6 +235,7 @@ def _pairs_row(
     ck = min(max(int((zi - origin[2]) / cell), 0), dims[2] - 1)
     n_bad_orient = 0
     n_pass_ab = 0
+    n_pass_c = 0
     n_acc = 0
     pos = offsets[i] - base if fill else 0
     end = offsets[i + 1] - base if fill else 0
@@ -233,33 +246,53 @@ def _pairs_row(
             start = max(cell_start[col + max(ck - reach, 0)], i + 1)
             stop = cell_start[col + min(ck + reach + 1, dims[2])]
             if fill:
-                pos = _fill_run(X, Y, Z, NX, NY, NZ, i, start, stop, lims, inside_ok, out_j, out_inside, pos, end)
+                pos = _fill_run(X, Y, Z, NX, NY, NZ, C2, i, start, stop, lims, inside_ok, out_j, out_inside, pos, end)
             else:
-                c0, c1, c2 = _count_run(X, Y, Z, NX, NY, NZ, i, start, stop, lims, inside_ok)
+                c0, c1, c2, c3 = _count_run(X, Y, Z, NX, NY, NZ, C2, i, start, stop, lims, inside_ok)
                 n_acc += c0
                 n_bad_orient += c1
                 n_pass_ab += c2
+                n_pass_c += c3
     if fill:
         return
     counters[i, 0] = n_acc
     counters[i, 1] = n_bad_orient
     counters[i, 2] = n_pass_ab
+    counters[i, 3] = n_pass_c
+
+
+def _cone_cos2(half: float, cos2: float, spread, order: np.ndarray, n: int) -> np.ndarray:
+    """Per point (in grid order), cos^2 of the cone its contact angle must stay in: cos^2(half - spread), or a
+    value no pair reaches (4) when the spread alone exceeds the half-angle; exactly cos2 where the spread is 0."""
+    c2 = np.full(n, cos2)
+    if spread is not None:
+        sp = np.asarray(spread, dtype=np.float64)[order]
+        room = half - sp
+        spread_at = sp > 0
+        c2[spread_at] = np.where(room[spread_at] >= 0.0, np.cos(np.maximum(room[spread_at], 0.0)) ** 2, 4.0)
+    return c2
 
 
 class PairPlan:
     """The counting pass of (a)-(c) over all pairs: exact per-criterion counts and how many pairs each row keeps.
+
+    `rejected_friction` counts the pairs (c) rejects with the point's own normals, `rejected_tolerance` those it
+    rejects only because of a normal within the position tolerance (`spread`, see pair_plan).
 
     `fill(r0, r1)` then produces the accepted pairs of rows r0 <= i < r1 (rows = points in the grid order the
     kernel uses), so a caller can stream the pairs through the collision stage in blocks of bounded size
     (`blocks(max_pairs)`) instead of holding all of them at once. Build it with `pair_plan()`.
     """
 
-    def __init__(self, points, normals, *, stroke, min_width, friction, safety_factor, inside, finger_thickness):
+    def __init__(
+        self, points, normals, *, stroke, min_width, friction, safety_factor, inside, finger_thickness, spread=None
+    ):
         p = np.ascontiguousarray(points, dtype=np.float64)
         nrm = np.ascontiguousarray(normals, dtype=np.float64)
         n = len(p)
         self.n = n
         self.pairs_total = n * (n - 1) // 2
+        self.rejected_tolerance = 0
         out_lo, out_hi = float(min_width), float(stroke)
         in_lo, in_hi = float(min_width + 2 * finger_thickness), float(stroke + 2 * finger_thickness)
         lo = out_lo if not inside else min(out_lo, in_lo)
@@ -271,7 +304,8 @@ class PairPlan:
             self.rejected_outside = self.rejected_friction = 0
             self.rejected_stroke = self.pairs_total
             return
-        cos_lim = math.cos(cone_half_angle_rad(friction, safety_factor))
+        half = cone_half_angle_rad(friction, safety_factor)
+        cos2 = math.cos(half) ** 2
         # cells of half the reach keep the visited volume near the sphere of radius `hi`
         cell = max(pair_cell_size(stroke, inside, finger_thickness), 1e-6)
         order, cell_start, dims, origin = _grid(p, cell)
@@ -279,15 +313,19 @@ class PairPlan:
         self.identity = bool(np.array_equal(order, np.arange(n)))
         ps, ns = p[order], nrm[order]
         soa = tuple(np.ascontiguousarray(a[:, k]) for a in (ps, ns) for k in range(3))
-        lims = np.array([lo * lo, hi * hi, out_lo**2, out_hi**2, in_lo**2, in_hi**2, cos_lim**2])
-        self._args = (*soa, cell_start, dims, origin, cell, 2, lims, bool(inside))
-        counters = np.zeros((n, 3), dtype=np.int64)
+        lims = np.array([lo * lo, hi * hi, out_lo**2, out_hi**2, in_lo**2, in_hi**2, cos2])
+        self._args = (*soa, _cone_cos2(half, cos2, spread, order, n), cell_start, dims, origin, cell, 2, lims)
+        self._args += (bool(inside),)
+        counters = np.zeros((n, 4), dtype=np.int64)
         _pairs_kernel(*self._args, False, self.offsets, np.zeros(0, np.int64), np.zeros(0, np.bool_), counters, 0, n)
         np.cumsum(counters[:, 0], out=self.offsets[1:])
         m = int(self.offsets[-1])
+        passed_c = int(counters[:, 3].sum())
         self.rejected_outside = int(counters[:, 1].sum())
-        self.rejected_friction = int(counters[:, 2].sum()) - m
+        self.rejected_friction = int(counters[:, 2].sum()) - passed_c
+        self.rejected_tolerance = passed_c - m
         self.rejected_stroke = self.pairs_total - m - self.rejected_outside - self.rejected_friction
+        self.rejected_stroke -= self.rejected_tolerance
 
     @property
     def accepted(self) -> int:
@@ -340,8 +378,13 @@ def pair_plan(
     safety_factor: float,
     inside: bool,
     finger_thickness: float,
+    spread: np.ndarray | None = None,
 ) -> PairPlan:
-    """Count the pairs passing (a)-(c) without storing them (see PairPlan); arguments as for antipodal_pairs."""
+    """Count the pairs passing (a)-(c) without storing them (see PairPlan); arguments as for antipodal_pairs.
+
+    spread: (n,) rad or None; per point, the largest angle between its normal and a surface normal within the
+    position tolerance. Criterion (c) then holds for every such normal: contact angle + spread <= the half-angle.
+    """
     return PairPlan(
         points,
         normals,
@@ -351,6 +394,7 @@ def pair_plan(
         safety_factor=safety_factor,
         inside=inside,
         finger_thickness=finger_thickness,
+        spread=spread,
     )
 
 
@@ -391,51 +435,6 @@ def antipodal_pairs(
         rejected_outside=plan.rejected_outside,
         rejected_friction=plan.rejected_friction,
     )
-
-
-def within_spread(
-    points: np.ndarray,
-    normals: np.ndarray,
-    i: np.ndarray,
-    j: np.ndarray,
-    inside: np.ndarray,
-    spread_rad: np.ndarray,
-    half_angle_rad: float,
-) -> np.ndarray:
-    """Criterion (c) with a position tolerance: (m,) bool, true where both contacts stay inside the cone for every
-    surface normal near them, i.e. contact angle + the point's normal spread (rad, per point) <= the half-angle.
-
-    Only pairs with a contact whose spread is not zero are evaluated (compiled); the rest passed (c) already."""
-    ok = np.empty(len(i), dtype=np.bool_)
-    if len(i):
-        _within_spread_kernel(
-            np.ascontiguousarray(points, dtype=np.float64),
-            np.ascontiguousarray(normals, dtype=np.float64),
-            np.ascontiguousarray(i, dtype=np.int64),
-            np.ascontiguousarray(j, dtype=np.int64),
-            np.ascontiguousarray(inside, dtype=np.bool_),
-            np.ascontiguousarray(spread_rad, dtype=np.float64),
-            float(half_angle_rad),
-            ok,
-        )
-    return ok
-
-
-@njit(parallel=True, cache=True, error_model="numpy")
-def _within_spread_kernel(P, N, I, J, inside, spread, half, ok):
-    for k in prange(I.shape[0]):
-        a, b = I[k], J[k]
-        if spread[a] <= 0.0 and spread[b] <= 0.0:
-            ok[k] = True
-            continue
-        dx, dy, dz = P[b, 0] - P[a, 0], P[b, 1] - P[a, 1], P[b, 2] - P[a, 2]
-        inv = 1.0 / np.sqrt(dx * dx + dy * dy + dz * dz)
-        sign = 1.0 if inside[k] else -1.0
-        c0 = sign * (N[a, 0] * dx + N[a, 1] * dy + N[a, 2] * dz) * inv
-        c1 = -sign * (N[b, 0] * dx + N[b, 1] * dy + N[b, 2] * dz) * inv
-        ang0 = np.arccos(min(1.0, max(-1.0, c0))) + spread[a]
-        ang1 = np.arccos(min(1.0, max(-1.0, c1))) + spread[b]
-        ok[k] = max(ang0, ang1) <= half
 
 
 def friction_margin_deg(

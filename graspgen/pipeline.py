@@ -116,8 +116,8 @@ def generate(
     loaded = _load(run, mesh_or_path, units, object_name)
     surface = _sample(run, loaded.part)
     pairs = _pairs(run, surface)
-    collided = _collide(run, surface, pairs)  # (c) within the position tolerance, (d) against the points
-    held = _hold_part(run, loaded, surface, collided.survivors)  # (e)
+    collided = _collide(run, surface, pairs)  # (d) against the points
+    held = _hold_part(run, loaded, surface, collided)  # (e)
     checked = _check_mesh(run, surface, pairs, held.survivors)  # (d) again, against the triangles
     cands = _candidates(run, loaded, surface, pairs, checked.survivors)
     stats = _stats(run, loaded, surface, pairs, collided, held, checked, cands)
@@ -212,13 +212,6 @@ class _Survivors:
 
 
 @dataclass(frozen=True)
-class _Collided:
-    survivors: _Survivors
-    #: pairs criterion (c) removed because a normal within the position tolerance leaves the cone
-    n_tolerance: int
-
-
-@dataclass(frozen=True)
 class _Held:
     """Criterion (e): the survivors that hold the part (all of them when it did not run)."""
 
@@ -289,6 +282,7 @@ def _pairs(run: _Run, surface: _Surface) -> _Pairs:
         safety_factor=params.safety_factor,
         inside=params.inside,
         finger_thickness=spec.finger_thickness,
+        spread=surface.spread,
     )
     run.timings["pairs"] = time.perf_counter() - t0
     run.report("pairs", 1.0)
@@ -296,9 +290,9 @@ def _pairs(run: _Run, surface: _Surface) -> _Pairs:
     return _Pairs(plan, antipodal.cone_half_angle_rad(run.mu, params.safety_factor), model)
 
 
-def _collide(run: _Run, surface: _Surface, pairs: _Pairs) -> _Collided:
-    """Criterion (c) with the position tolerance, then (d), for every pair of the plan, streamed in blocks of
-    `_PAIR_BLOCK` pairs.
+def _collide(run: _Run, surface: _Surface, pairs: _Pairs) -> _Survivors:
+    """Criterion (d) for every pair of the plan (which already judged (c) within the position tolerance),
+    streamed in blocks of `_PAIR_BLOCK` pairs.
 
     The survivors come in the order of `antipodal_pairs`. Filling the pairs counts as the pairs stage, the rest as
     the collision stage.
@@ -310,19 +304,11 @@ def _collide(run: _Run, surface: _Surface, pairs: _Pairs) -> _Collided:
     segment = max(-(-m // _COLLISION_BATCHES), 1)  # pairs per kernel call, then set by the measured rate
     kept: list[_Survivors] = []
     n_kept = 0
-    n_tolerance = 0
     t_fill = t_coll = 0.0
     for r0, r1 in plan.blocks(_PAIR_BLOCK):
         t0 = time.perf_counter()
         bi, bj, bins = plan.fill(r0, r1)
         p0 = int(plan.offsets[r0])
-        block = len(bi)
-        pos = np.arange(block)  # each pair's place in the block, for progress
-        if surface.spread is not None:
-            ok = antipodal.within_spread(pts, nrm, bi, bj, bins, surface.spread, pairs.half_angle)
-            if not ok.all():
-                n_tolerance += int(np.sum(~ok))
-                bi, bj, bins, pos = bi[ok], bj[ok], bins[ok], pos[ok]
         t_fill += time.perf_counter() - t0
         t0 = time.perf_counter()
         free = np.empty((len(bi), rolls), dtype=bool)
@@ -334,10 +320,8 @@ def _collide(run: _Run, surface: _Surface, pairs: _Pairs) -> _Collided:
             free[sl] = _collision.free_rolls_of_pairs(pts, bi[sl], bj[sl], bins[sl], pairs.model, rolls, normals=nrm)
             rate = (hi - lo) / max(time.perf_counter() - t_seg, 1e-6)
             segment = max(int(rate * _COLLISION_REPORT_S), _MIN_SEGMENT)
-            run.report("collision", (p0 + (block if hi == len(bi) else int(pos[hi]))) / m)
+            run.report("collision", (p0 + hi) / m)
             lo = hi
-        if len(bi) == 0 and m:
-            run.report("collision", (p0 + block) / m)
         block_kept = _Survivors(bi, bj, free, bins).keep(free.any(axis=1))
         n_kept += len(block_kept)
         if n_kept > MAX_CANDIDATES:
@@ -355,12 +339,9 @@ def _collide(run: _Run, surface: _Surface, pairs: _Pairs) -> _Collided:
         run.report("collision", 1.0)  # otherwise the last segment reported it
     if not kept:
         e = np.zeros(0, dtype=np.int64)
-        return _Collided(
-            _Survivors(e, e.copy(), np.zeros((0, rolls), dtype=bool), np.zeros(0, dtype=bool)), n_tolerance
-        )
+        return _Survivors(e, e.copy(), np.zeros((0, rolls), dtype=bool), np.zeros(0, dtype=bool))
     cat = np.concatenate
-    survivors = _Survivors(*(cat([getattr(s, k) for s in kept]) for k in ("i", "j", "free", "inside")))
-    return _Collided(survivors, n_tolerance)
+    return _Survivors(*(cat([getattr(s, k) for s in kept]) for k in ("i", "j", "free", "inside")))
 
 
 def _hold_part(run: _Run, loaded: _Loaded, surface: _Surface, survivors: _Survivors) -> _Held:
@@ -446,20 +427,20 @@ def _stats(
     loaded: _Loaded,
     surface: _Surface,
     pairs: _Pairs,
-    collided: _Collided,
+    collided: _Survivors,
     held: _Held,
     checked: _MeshChecked,
     cands: Candidates,
 ) -> dict[str, Any]:
     """The export's stats of the stages so far (clustering, selection and validation add theirs)."""
     plan, part = pairs.plan, loaded.part
-    n_point_free = len(collided.survivors)
+    n_point_free = len(collided)
     # the mesh-exact check ran after (e): what it removed counts as collision, with the point test's
     rejected = {
         "stroke": plan.rejected_stroke,
         "outside": plan.rejected_outside,
-        "friction": plan.rejected_friction + collided.n_tolerance,
-        "collision": plan.accepted - collided.n_tolerance - n_point_free + checked.removed,
+        "friction": plan.rejected_friction + plan.rejected_tolerance,
+        "collision": plan.accepted - n_point_free + checked.removed,
         "hold": held.removed,
     }
     stats: dict[str, Any] = {
@@ -473,7 +454,7 @@ def _stats(
         "watertight": bool(part.watertight),
         "warnings": list(part.warnings),
         "exact": {
-            "friction_position_tolerance": collided.n_tolerance,
+            "friction_position_tolerance": plan.rejected_tolerance,
             "collision_mesh_rolls": checked.removed_rolls,
             "collision_mesh_candidates": checked.removed,
         },

@@ -15,7 +15,7 @@ import trimesh
 
 import graspgen
 from graspgen import hold, meshtree
-from graspgen.antipodal import cone_half_angle_rad, within_spread
+from graspgen.antipodal import cone_half_angle_rad, pair_plan
 from graspgen.collision import collision_model
 from graspgen.errors import InvalidParameterError
 from graspgen.parts import load_part
@@ -24,6 +24,8 @@ from graspgen.transforms import grasp_frames
 
 ROOT = Path(__file__).resolve().parents[2]
 GRIPPER = {**json.loads((ROOT / "examples" / "pgn-80.json").read_text()), "grip_force": 20.0}
+#: criteria (a)-(c) as the pipeline calls them for GRIPPER (outside grasps, friction 0.5, safety factor 1.5)
+_PAIR_KW = dict(stroke=0.08, min_width=0.0, friction=0.5, safety_factor=1.5, inside=False, finger_thickness=0.01)
 MU, F = 0.5, 20.0
 
 
@@ -217,15 +219,15 @@ def test_sphere_gets_point_contact_torsion_and_a_flat_face_a_patch():
 def test_contact_half_a_millimetre_from_an_edge_fails_friction_under_the_default_tolerance():
     cube = trimesh.creation.box(extents=(0.04, 0.04, 0.04))
     tree = meshtree.build_tree(cube.vertices, cube.faces)
-    half = cone_half_angle_rad(0.5, 1.5)
     # two contacts on the +-z faces, squeezed along z: 0.5 mm and 3 mm from the edge at x = +20 mm
     for dist, expect in ((0.0005, False), (0.003, True)):
         x = 0.02 - dist
         pts = np.array([[x, 0.0, -0.02], [x, 0.0, 0.02]])
         nrm = np.array([[0.0, 0.0, -1.0], [0.0, 0.0, 1.0]])
         spread = meshtree.normal_spread_rad(tree, pts, nrm, 0.001)
-        ok = within_spread(pts, nrm, np.array([0]), np.array([1]), np.array([False]), spread, half)
-        assert bool(ok[0]) is expect, (dist, np.degrees(spread))
+        plan = pair_plan(pts, nrm, spread=spread, **_PAIR_KW)
+        assert (plan.accepted == 1) is expect, (dist, np.degrees(spread))
+        assert plan.rejected_tolerance == (0 if expect else 1) and plan.rejected_friction == 0
     # with no tolerance the contact near the edge is a face contact again
     assert np.all(meshtree.normal_spread_rad(tree, pts, nrm, 0.0) == 0)
 
@@ -445,23 +447,33 @@ def test_cli_mass_and_hold_options(tmp_path, capsys):
         assert capsys.readouterr().err.strip().count("\n") == 0
 
 
-def test_within_spread_equals_a_plain_reference():
+def test_pair_plan_tolerance_equals_a_plain_reference():
+    """Criterion (c) within the position tolerance, judged in the pair kernel as a per-point cone, equals the
+    plain rule (contact angle + the point's spread <= the half-angle) evaluated with arccos over all pairs."""
     rng = np.random.default_rng(11)
-    n, m = 300, 5000
+    n = 400
     pts = rng.normal(size=(n, 3)) * 0.02
     nrm = rng.normal(size=(n, 3))
     nrm /= np.linalg.norm(nrm, axis=1)[:, None]
     spread = np.where(rng.random(n) < 0.5, 0.0, rng.uniform(0, 0.3, n))
-    i = rng.integers(0, n, m)
-    j = (i + rng.integers(1, n, m)) % n
-    ins = rng.random(m) < 0.3
+    spread[:5] = 1.0  # beyond the half-angle: such a point never passes
+    kw = dict(stroke=0.08, min_width=0.0, friction=0.8, safety_factor=1.2, inside=True, finger_thickness=0.005)
+    plain = pair_plan(pts, nrm, **kw)
+    plan = pair_plan(pts, nrm, spread=spread, **kw)
+    i, j, ins = plain.fill()
     half = cone_half_angle_rad(0.8, 1.2)
     d = pts[j] - pts[i]
     d /= np.linalg.norm(d, axis=1)[:, None]
     sign = np.where(ins, 1.0, -1.0)
     a0 = np.arccos(np.clip(sign * np.sum(nrm[i] * d, axis=1), -1, 1)) + spread[i]
     a1 = np.arccos(np.clip(-sign * np.sum(nrm[j] * d, axis=1), -1, 1)) + spread[j]
-    expect = (np.maximum(a0, a1) <= half) | ((spread[i] == 0) & (spread[j] == 0))
-    got = within_spread(pts, nrm, i, j, ins, spread, half)
-    np.testing.assert_array_equal(got, expect)
-    assert 0 < got.sum() < m
+    keep = np.maximum(a0, a1) <= half
+    gi, gj, gins = plan.fill()
+    np.testing.assert_array_equal(gi, i[keep])
+    np.testing.assert_array_equal(gj, j[keep])
+    np.testing.assert_array_equal(gins, ins[keep])
+    assert 0 < plan.accepted < plain.accepted and ins[keep].any() and (~ins[keep]).any()
+    assert plan.rejected_tolerance == plain.accepted - plan.accepted
+    counts = ("rejected_stroke", "rejected_outside", "rejected_friction")
+    assert [getattr(plan, c) for c in counts] == [getattr(plain, c) for c in counts]
+    assert not np.isin(np.arange(5), np.concatenate([gi, gj])).any()
