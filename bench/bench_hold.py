@@ -101,6 +101,15 @@ def config_kwargs(config: str, mass: float) -> dict | None:
     return kw
 
 
+def export(part, gripper: dict, config: str, args):
+    """The grasp set generate() exports for `part` under `config` (args.points, k = args.k1 x args.k2, seed 0,
+    args.mass), or None when this checkout's generate cannot run the configuration."""
+    kw = config_kwargs(config, args.mass)
+    if kw is None:
+        return None
+    return graspgen.generate(part, gripper, points=args.points, k1=args.k1, k2=args.k2, seed=0, **kw)
+
+
 def hold_margins_of(part, gs, idx: np.ndarray, spec: GripperSpec, args) -> np.ndarray | None:
     """(e)'s hold margin of candidates `idx`: the candidate set's own when it has them, else computed with
     graspgen.hold the way criterion (e) does (None when this checkout has no graspgen.hold)."""
@@ -162,12 +171,11 @@ def run_part(label: str, part, args, members) -> dict:
     paper_gs = None
     cache: dict = {}
     for config in args.configs:
-        kw = config_kwargs(config, args.mass)
-        if kw is None:
+        if config_kwargs(config, args.mass) is None:
             print(f"  {label} {config}: generate() has no hold/mass_kg in this checkout, skipped", flush=True)
             continue
         t0 = time.perf_counter()
-        gs = graspgen.generate(part, gripper, points=args.points, k1=args.k1, k2=args.k2, seed=0, **kw)
+        gs = export(part, gripper, config, args)
         t_gen = time.perf_counter() - t0
         if config == "paper":
             paper_gs = gs
@@ -210,9 +218,7 @@ def run_part(label: str, part, args, members) -> dict:
         row["configs"][config] = out
         print(f"  {label} {config}: {json.dumps(out, default=str)}", flush=True)
     if args.sample > 0 and paper_gs is None:  # the confusion table needs the paper configuration's candidates
-        paper_gs = graspgen.generate(
-            part, gripper, points=args.points, k1=args.k1, k2=args.k2, seed=0, **config_kwargs("paper", args.mass)
-        )
+        paper_gs = export(part, gripper, "paper", args)
     if args.sample > 0 and len(paper_gs.candidates):
         c = paper_gs.candidates
         n = len(c)
@@ -394,11 +400,13 @@ def markdown(rows, members, args, wall_s) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_block(path: Path, block: str) -> None:
+def write_block(path: Path, block: str, start: str = START, end: str = END) -> None:
+    """Put `block` (which begins with `start` and ends with `end`) in place of the file's block between those
+    markers, or append it when the file has none."""
     text = path.read_text() if path.is_file() else ""
-    if START in text and END in text:
-        head, rest = text.split(START, 1)
-        tail = rest.split(END, 1)[1]
+    if start in text and end in text:
+        head, rest = text.split(start, 1)
+        tail = rest.split(end, 1)[1]
         text = head + block.rstrip("\n") + tail
     else:
         text = text.rstrip("\n") + "\n\n" + block
