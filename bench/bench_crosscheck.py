@@ -43,6 +43,7 @@ from graspgen.gripper import GripperSpec  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 START, END = "<!-- bench_crosscheck:start -->", "<!-- bench_crosscheck:end -->"
 CONFIGS = bench_hold.CONFIGS
+pct = bench_hold.pct
 
 
 def _key(pose: np.ndarray, width: float) -> str:
@@ -160,26 +161,15 @@ def summary(out: dict) -> dict:
     }
 
 
-def pct(a, b) -> str:
-    return "-" if not b else f"{100.0 * a / b:.1f} %"
-
-
-def _run_arguments() -> list[str]:
-    out, skip = [], False
-    for a in sys.argv[1:]:
-        if skip:
-            skip = False
-        elif a in ("--out", "--json", "--render"):
-            skip = True
-        elif not a.startswith(("--out=", "--json=", "--render=")):
-            out.append(a)
-    return out
-
-
 def markdown(rows: list[dict], args, wall_s: float) -> str:
     members = cb.members(0)[1:]
     configs = [c for c in CONFIGS if any(c in r["configs"] for r in rows)]
-    cmd = args.command or " ".join(["PYTHONUNBUFFERED=1 .venv/bin/python bench/bench_crosscheck.py", *_run_arguments()])
+    cmd = args.command or " ".join(
+        [
+            "PYTHONUNBUFFERED=1 .venv/bin/python bench/bench_crosscheck.py",
+            *bench_hold._run_arguments(("--out", "--json", "--render")),
+        ]
+    )
     c = cb.BULLET
     try:
         import mujoco

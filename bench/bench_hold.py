@@ -259,15 +259,15 @@ def pct(a, b):
     return "-" if not b else f"{100.0 * a / b:.1f} %"
 
 
-def _run_arguments() -> list[str]:
-    """This run's command-line arguments for the text, without where it wrote (--out, --json)."""
+def _run_arguments(drop: tuple[str, ...] = ("--out", "--json")) -> list[str]:
+    """This run's command-line arguments for the text, without the options `drop` (where it wrote) and their values."""
     out, skip = [], False
     for a in sys.argv[1:]:
         if skip:
             skip = False
-        elif a in ("--out", "--json"):
+        elif a in drop:
             skip = True
-        elif not a.startswith(("--out=", "--json=")):
+        elif not a.startswith(tuple(f"{d}=" for d in drop)):
             out.append(a)
     return out
 
