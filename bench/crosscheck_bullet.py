@@ -29,6 +29,8 @@ approach direction, palm at -Z), which is Bullet's world frame here:
   without contact for more than 20 ms, or the contact midpoint moving more than 20 mm); `slipped` (the contact
   midpoint moved more than 5 mm, or the part turned more than 10 degrees, relative to the gripper); else held.
 
+Outside grasps only: the fingers close inwards (bench_crosscheck.py leaves inside grasps unjudged and says so).
+
 `prepare_part(mesh, spec, mass_kg=, grip_force=, friction=)` builds the decomposition once per part;
 `BulletJudge(part)` owns one headless client (`pybullet.DIRECT`) and `judge.simulate(T_object_grasp, width,
 perturbation)` runs one grasp (the world is reset and rebuilt for every grasp, so results do not depend on order).
