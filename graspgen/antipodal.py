@@ -267,9 +267,9 @@ def _cone_cos2(half: float, cos2: float, spread, order: np.ndarray, n: int) -> n
     c2 = np.full(n, cos2)
     if spread is not None:
         sp = np.asarray(spread, dtype=np.float64)[order]
-        room = half - sp
-        spread_at = sp > 0
-        c2[spread_at] = np.where(room[spread_at] >= 0.0, np.cos(np.maximum(room[spread_at], 0.0)) ** 2, 4.0)
+        at = sp > 0
+        room = half - sp[at]
+        c2[at] = np.where(room >= 0.0, np.cos(room) ** 2, 4.0)
     return c2
 
 
@@ -314,18 +314,17 @@ class PairPlan:
         ps, ns = p[order], nrm[order]
         soa = tuple(np.ascontiguousarray(a[:, k]) for a in (ps, ns) for k in range(3))
         lims = np.array([lo * lo, hi * hi, out_lo**2, out_hi**2, in_lo**2, in_hi**2, cos2])
-        self._args = (*soa, _cone_cos2(half, cos2, spread, order, n), cell_start, dims, origin, cell, 2, lims)
-        self._args += (bool(inside),)
+        c2 = _cone_cos2(half, cos2, spread, order, n)
+        self._args = (*soa, c2, cell_start, dims, origin, cell, 2, lims, bool(inside))
         counters = np.zeros((n, 4), dtype=np.int64)
         _pairs_kernel(*self._args, False, self.offsets, np.zeros(0, np.int64), np.zeros(0, np.bool_), counters, 0, n)
         np.cumsum(counters[:, 0], out=self.offsets[1:])
         m = int(self.offsets[-1])
-        passed_c = int(counters[:, 3].sum())
+        passed_ab, passed_c = int(counters[:, 2].sum()), int(counters[:, 3].sum())
         self.rejected_outside = int(counters[:, 1].sum())
-        self.rejected_friction = int(counters[:, 2].sum()) - passed_c
+        self.rejected_friction = passed_ab - passed_c
         self.rejected_tolerance = passed_c - m
-        self.rejected_stroke = self.pairs_total - m - self.rejected_outside - self.rejected_friction
-        self.rejected_stroke -= self.rejected_tolerance
+        self.rejected_stroke = self.pairs_total - self.rejected_outside - passed_ab
 
     @property
     def accepted(self) -> int:
