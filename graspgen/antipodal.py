@@ -21,6 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
+from . import libm
+
 __all__ = [
     "PairResult",
     "PairPlan",
@@ -269,7 +271,7 @@ def _cone_cos2(half: float, cos2: float, spread, order: np.ndarray, n: int) -> n
         sp = np.asarray(spread, dtype=np.float64)[order]
         at = sp > 0
         room = half - sp[at]
-        c2[at] = np.where(room >= 0.0, np.cos(room) ** 2, 4.0)
+        c2[at] = np.where(room >= 0.0, libm.cos(room) ** 2, 4.0)
     return c2
 
 
@@ -445,5 +447,5 @@ def friction_margin_deg(
     sign = np.where(inside, 1.0, -1.0)
     c0 = np.clip(sign * np.sum(normals[i] * d, axis=1), -1.0, 1.0)
     c1 = np.clip(-sign * np.sum(normals[j] * d, axis=1), -1.0, 1.0)
-    worst = np.maximum(np.arccos(c0), np.arccos(c1))
+    worst = np.maximum(libm.arccos(c0), libm.arccos(c1))
     return np.degrees(half_angle_rad - worst)

@@ -50,6 +50,7 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from . import libm
 from .gripper import GripperSpec
 from .params import TOLERANCES, Tolerances
 
@@ -989,7 +990,7 @@ def _prepare(points, normals, model, rolls):
     perm, nodes = _build_tree(P, N, leaves, pad, _SPLIT_NORMAL_WEIGHT, _SPLIT_THICKNESS)
     Ps = P[perm]
     psi = roll_angles_rad(rolls)
-    cos_k, sin_k = np.cos(psi), np.sin(psi)
+    cos_k, sin_k = libm.cos(psi), libm.sin(psi)
     half = rolls // 2 if rolls % 2 == 0 else 0
     gfac = 0.0
     if half:

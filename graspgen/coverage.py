@@ -19,6 +19,8 @@ from typing import Any
 import numpy as np
 from numba import njit, prange
 
+from . import libm
+
 __all__ = ["LEVELS", "CoverageReport", "coverage", "coverage_shares", "axis_angles_deg", "combined_distance"]
 
 #: (radius in metres, axis angle in degrees) at which coverage is reported
@@ -64,7 +66,7 @@ def _unit(a: np.ndarray) -> np.ndarray:
 def axis_angles_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Sign-invariant angles (degrees, 0..90) between axes a (n, 3) and b (m, 3): (n, m)."""
     c = np.abs(_unit(a) @ _unit(b).T)
-    return np.degrees(np.arccos(np.clip(c, 0.0, 1.0)))
+    return np.degrees(libm.arccos(np.clip(c, 0.0, 1.0)))
 
 
 def combined_distance(

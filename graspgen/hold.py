@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
+from . import libm
 from .sampling import cell_grid, cell_runs
 
 _CHUNK = 1024  # candidates per unit of parallel work
@@ -193,7 +194,7 @@ def _quarter_sphere(count: int) -> np.ndarray:
     x = k / count  # uniform in [0, 1]: equal areas
     phi = np.mod(k * (math.sqrt(5.0) - 1.0) / 2.0, 1.0) * math.pi  # golden-ratio steps over the half turn
     s = np.sqrt(1.0 - x * x)
-    return np.ascontiguousarray(np.stack([x, s * np.cos(phi), s * np.sin(phi)], axis=1))
+    return np.ascontiguousarray(np.stack([x, s * libm.cos(phi), s * libm.sin(phi)], axis=1))
 
 
 def hold_margins(

@@ -44,6 +44,7 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from . import libm
 from .collision import CollisionModel, _basis, _regions, _x_range_constants, _x_ranges
 
 __all__ = ["MeshTree", "build_tree", "normal_spread_rad", "mesh_free_rolls"]
@@ -372,8 +373,8 @@ def mesh_free_rolls(
             tree.children,
             reg,
             model_f,
-            np.cos(psi),
-            np.sin(psi),
+            libm.cos(psi),
+            libm.sin(psi),
             float(switch),
             guard,
             numba.get_num_threads(),

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from . import libm
 from .errors import InvalidParameterError
 from .export import Candidates, GraspSet
 from .gripper import GripperSpec
@@ -104,13 +105,13 @@ class PickIndex:
         axes = candidates.axes
         y0, z0 = roll_basis(axes)  # per candidate; the pairs combine them with their roll
         psi = np.asarray(candidates.roll_angles_rad, dtype=np.float64)[ri][:, None]
-        c, s = np.cos(psi), np.sin(psi)
+        c, s = libm.cos(psi), libm.sin(psi)
         y = c * y0[ci] + s * z0[ci]
         z = -s * y0[ci] + c * z0[ci]
         # stored by approach direction (a 32 x 64 grid over cos(polar) and azimuth), so that the pairs inside a cone
         # lie in runs and gathering them reads memory in order; in the quality order within a cell
         polar = np.clip(((z[:, 2] + 1) * 16).astype(np.int64), 0, 31)
-        azimuth = ((np.arctan2(z[:, 1], z[:, 0]) + np.pi) * (64 / (2 * np.pi))).astype(np.int64) % 64
+        azimuth = ((libm.arctan2(z[:, 1], z[:, 0]) + np.pi) * (64 / (2 * np.pi))).astype(np.int64) % 64
         order = np.lexsort((rank, polar * 64 + azimuth))
         frames = np.empty((len(ci), 12), dtype=np.float64)
         frames[:, 0:3] = axes[ci[order]]
@@ -459,7 +460,7 @@ def _best(index: PickIndex, ok: np.ndarray, cos_z: np.ndarray, limit: int) -> np
         kth = idx[np.argpartition(index.rank[idx], limit - 1)[limit - 1]]
         idx = idx[index.score[idx] >= index.score[kth]]
     # angles equal to 1e-9 degrees are a tie (pairs of parallel candidates differ in the last bits), broken by index
-    angle = np.round(np.degrees(np.arccos(np.clip(cos_z[idx], -1.0, 1.0))), ANGLE_DECIMALS)
+    angle = np.round(np.degrees(libm.arccos(np.clip(cos_z[idx], -1.0, 1.0))), ANGLE_DECIMALS)
     order = np.lexsort((index.roll_index[idx], index.candidate[idx], angle, -index.score[idx]))
     return idx[order[:limit]]
 
@@ -490,7 +491,7 @@ def _grasps_out(
         "open_width": np.minimum(width + g.pregrasp_clearance, g.stroke).tolist(),
         "roll_deg": np.degrees(index.roll_angles_rad[index.roll_index[chosen]]).tolist(),
         "roll_index": index.roll_index[chosen].tolist(),
-        "approach_angle_deg": np.degrees(np.arccos(np.clip(cos_z[chosen], -1.0, 1.0))).tolist(),
+        "approach_angle_deg": np.degrees(libm.arccos(np.clip(cos_z[chosen], -1.0, 1.0))).tolist(),
         "candidate": cand.tolist(),
         "cluster": index.labels[cand].tolist(),
         "medoid": index.medoid[cand].tolist(),

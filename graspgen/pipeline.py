@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import trimesh
 
-from . import antipodal, clustering, meshtree, quality, sampling
+from . import antipodal, clustering, libm, meshtree, quality, sampling
 from . import collision as _collision
 from . import hold as _hold
 from .coverage import coverage
@@ -490,7 +490,7 @@ def _normal_spread(tree, pts, nrm, tolerance: float) -> np.ndarray | None:
 
         spread = np.zeros(len(pts))
         for a, hood in enumerate(cKDTree(pts).query_ball_point(pts, r=tolerance)):
-            spread[a] = float(np.arccos(np.clip(np.min(nrm[hood] @ nrm[a]), -1.0, 1.0)))
+            spread[a] = float(libm.arccos(np.clip(np.min(nrm[hood] @ nrm[a]), -1.0, 1.0)))
     return spread if np.any(spread > 0) else None
 
 

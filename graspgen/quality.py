@@ -31,6 +31,7 @@ import numpy as np
 from numba import njit, prange
 from scipy.spatial import cKDTree
 
+from . import libm
 from .params import SELECT_MODES
 from .sampling import cell_grid, cell_runs
 
@@ -202,7 +203,7 @@ def members_by_distance(
     dt = np.linalg.norm(midpoints[members] - midpoints[centre], axis=1)
     a = axes[members] / np.linalg.norm(axes[members], axis=1, keepdims=True)
     b = axes[centre] / np.linalg.norm(axes[centre])
-    ang = np.degrees(np.arccos(np.clip(np.abs(a @ b), 0.0, 1.0)))
+    ang = np.degrees(libm.arccos(np.clip(np.abs(a @ b), 0.0, 1.0)))
     dist = np.maximum(dt / near.radius, ang / near.angle_deg)
     order = np.lexsort((members, dist))
     return members[order], dist[order]

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import libm
+
 __all__ = [
     "ROLL_REFERENCE_SWITCH",
     "roll_angles_rad",
@@ -46,7 +48,7 @@ def grasp_frames(midpoints: np.ndarray, axes: np.ndarray, rolls_rad: np.ndarray)
     axes = np.asarray(axes, dtype=np.float64).reshape(-1, 3)
     psi = np.asarray(rolls_rad, dtype=np.float64).reshape(-1, 1)
     y0, z0 = roll_basis(axes)
-    c, s = np.cos(psi), np.sin(psi)
+    c, s = libm.cos(psi), libm.sin(psi)
     y = c * y0 + s * z0
     z = -s * y0 + c * z0
     T = np.zeros((len(axes), 4, 4), dtype=np.float64)
