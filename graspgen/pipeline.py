@@ -488,9 +488,10 @@ def _normal_spread(tree, pts, nrm, tolerance: float) -> np.ndarray | None:
     else:
         from scipy.spatial import cKDTree
 
-        spread = np.zeros(len(pts))
+        lowest = np.ones(len(pts))
         for a, hood in enumerate(cKDTree(pts).query_ball_point(pts, r=tolerance)):
-            spread[a] = float(libm.arccos(np.clip(np.min(nrm[hood] @ nrm[a]), -1.0, 1.0)))
+            lowest[a] = np.min(nrm[hood] @ nrm[a])
+        spread = libm.arccos(np.clip(lowest, -1.0, 1.0))
     return spread if np.any(spread > 0) else None
 
 
