@@ -47,6 +47,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import graspgen  # noqa: E402
 from graspgen import physics  # noqa: E402
 from graspgen.gripper import GripperSpec  # noqa: E402
+from graspgen.params import Params  # noqa: E402
 from graspgen.parts import load_part  # noqa: E402
 from graspgen.pipeline import _poses  # noqa: E402
 
@@ -376,14 +377,18 @@ def markdown(rows, members, args, wall_s) -> str:
         for f in r["configs"][config].get("failed", [])
     ]
     if failed:
+        g, shake = physics.SIM.gravity, physics.SIM.shake_acceleration
+        peak = (g + shake) / g  # the nominal simulation's largest load, in g: gravity and the shake along it
+        heavy = max(p.mass_scale for p in members)
+        design = (g + Params().accel) / g  # what (e) guarantees at margin 1, in g of the nominal weight
         lines += [
             "",
             "### Failed exports and their hold margins",
             "",
-            "Every exported grasp that failed the nominal simulation or a member. The nominal simulation peaks at "
-            "about 1.5 g (gravity and the 5 m/s^2 shake along it), so under mass x1.5 it asks for 2.25 g of the "
-            "part's nominal weight where (e) guarantees 2 g: a failure there is beyond (e)'s design load below a "
-            "margin of about 1.13.",
+            f"Every exported grasp that failed the nominal simulation or a member. The nominal simulation peaks at "
+            f"about {peak:.2f} g (gravity and the {shake:g} m/s^2 shake along it), so under mass x{heavy:g} it asks "
+            f"for {heavy * peak:.2f} g of the part's nominal weight where (e) guarantees {design:.2f} g: a failure "
+            f"there is beyond (e)'s design load below a margin of about {heavy * peak / design:.2f}.",
             "",
             "| part | configuration | candidate | width | hold margin | failed under |",
             "|---|---|---|---|---|---|",
@@ -453,6 +458,18 @@ def write_block(path: Path, block: str, start: str = START, end: str = END) -> N
     path.write_text(text)
 
 
+def add_run_arguments(ap: argparse.ArgumentParser, configs: tuple[str, ...], json_help: str) -> None:
+    """The options this bench shares with bench_crosscheck: which parts and configurations, where the markdown and
+    the raw rows go, and --render (with --wall and --command) to write the markdown of an earlier run's rows."""
+    ap.add_argument("--parts", nargs="*")
+    ap.add_argument("--configs", nargs="*", default=list(configs), choices=configs)
+    ap.add_argument("--out", default=str(ROOT / "docs" / "benchmarks_quality.md"))
+    ap.add_argument("--json", help=json_help)
+    ap.add_argument("--render", help="only write the markdown of the rows (--json) of an earlier run")
+    ap.add_argument("--wall", type=float, default=None, help="with --render: the earlier run's wall time (s)")
+    ap.add_argument("--command", help="with --render: the command line(s) of the earlier run, for the text")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--points", type=int, default=5000)
@@ -476,13 +493,7 @@ def main() -> None:
     ap.add_argument("--sample-perturbed", type=int, default=30)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--merge", help="rows (--json) of an earlier run: its configurations are kept, this run's added")
-    ap.add_argument("--parts", nargs="*")
-    ap.add_argument("--configs", nargs="*", default=list(CONFIGS), choices=CONFIGS)
-    ap.add_argument("--out", default=str(ROOT / "docs" / "benchmarks_quality.md"))
-    ap.add_argument("--json", help="also write the raw rows here")
-    ap.add_argument("--render", help="only write the markdown of the rows (--json) of an earlier run")
-    ap.add_argument("--wall", type=float, default=None, help="with --render: the earlier run's wall time (s)")
-    ap.add_argument("--command", help="with --render: the command line(s) of the earlier run, for the text")
+    add_run_arguments(ap, CONFIGS, "also write the raw rows here")
     args = ap.parse_args()
     members = physics.perturbation_set(0)
     earlier = {r["part"]: r for r in json.loads(Path(args.merge).read_text())} if args.merge else {}
