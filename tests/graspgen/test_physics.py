@@ -510,16 +510,21 @@ def test_a_decomposition_is_made_once_per_mesh_and_setting(monkeypatch):
     assert len(calls) == 3
 
 
-def test_a_piece_reaching_into_the_palm_where_the_part_does_not_is_not_flung_out(monkeypatch):
+@pytest.mark.parametrize("depth_mm", [2.5, 0.5])
+def test_a_piece_reaching_into_the_palm_where_the_part_does_not_is_not_flung_out(monkeypatch, depth_mm):
     """A convex piece that bridges a recess can reach into the palm at the grasp where the part's own surface is
     clear; the approach check forgives it, and then MuJoCo must not push the part out of that penetration (the
-    sileane pepper's hull reached 1.6 mm into the palm and the part flew from between the open fingers). Here a
-    20 mm block is gripped across x with an extra piece, 18 mm wide between the fingers, 2.5 mm into the palm."""
+    sileane pepper's hull reached 1.6 mm into the palm and the part flew from between the open fingers; a tless_13
+    piece 0.58 mm deep, within the approach tolerance, threw the part 2.8 mm and 3.7 degrees before the fingers
+    touched it). Here a 20 mm block is gripped across x with an extra piece, 18 mm wide between the fingers,
+    `depth_mm` into the palm: deeper than the approach tolerance, and within it."""
     from graspgen.transforms import grasp_frames
 
     block = trimesh.creation.box(extents=(0.02, 0.03, 0.02))
-    extra = trimesh.creation.box(extents=(0.018, 0.02, 0.0075))
-    extra.apply_translation([0.0, 0.0, -0.01375])  # z from -17.5 to -10 mm; the palm's front face is at -15 mm
+    depth = depth_mm * 1e-3
+    extra = trimesh.creation.box(extents=(0.018, 0.02, 0.005 + depth))
+    extra.apply_translation([0.0, 0.0, -0.01 - (0.005 + depth) / 2])  # z from -15 mm - depth to -10 mm
+    assert (depth > physics.SIM.approach_tolerance) == (depth_mm == 2.5)
     monkeypatch.setattr(physics, "_decompose", lambda mesh, c, seed: ([block, extra], "coacd", None))
     rolls = 2 * np.pi * np.arange(16) / 16
     frames = grasp_frames(np.zeros((16, 3)), np.tile([[1.0, 0.0, 0.0]], (16, 1)), rolls)
@@ -529,7 +534,24 @@ def test_a_piece_reaching_into_the_palm_where_the_part_does_not_is_not_flung_out
     assert SPEC.palm_box().center[2] + SPEC.palm_box().extents[2] / 2 == pytest.approx(-0.015)
     held = physics.simulate_grasp(sim, T, 0.02)
     assert held.success, held
-    # the same grasp when the penetration is left to MuJoCo: the part is pushed out and lost
+    run = physics._Grasp(sim, T, 0.02, False, np.random.default_rng(0))
+    assert run.run().success and run.m is sim.model_for(physics.NOMINAL, palm=False)  # it went on without the palm
+
+    def moved_before_the_fingers_close(palm: bool) -> float:
+        """How far (m) the part moves in the first 20 ms at the grasp, fingers open, with or without the palm."""
+        g = physics._Grasp(sim, T, 0.02, False, np.random.default_rng(0))
+        assert not g.approach_collides()
+        if not palm:
+            g._without_palm()
+        g.mj.mj_forward(g.m, g.d)
+        start = g._part_pose()[0]
+        g.mj.mj_step(g.m, g.d, nstep=20)
+        return float(np.linalg.norm(g._part_pose()[0] - start))
+
+    # left to MuJoCo, the penetration throws the part before either finger touches it; without the palm it stays
+    assert moved_before_the_fingers_close(palm=True) > depth
+    assert moved_before_the_fingers_close(palm=False) < 1e-5
     monkeypatch.setattr(physics._Grasp, "_palm_penetration", lambda self: 0.0)
     flung = physics.simulate_grasp(sim, T, 0.02)
-    assert not flung.success
+    if depth_mm == 2.5:  # ... and the deeper one out of the fingers
+        assert not flung.success
