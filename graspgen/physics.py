@@ -407,15 +407,29 @@ def _decompose_once(mesh: trimesh.Trimesh, c: SimConstants, seed: int) -> tuple[
         import coacd
     except ImportError:
         return [mesh.convex_hull], "convex-hull", "coacd is not installed: the part is simulated as its convex hull"
-    try:
-        coacd.set_log_level("error")
-        parts = coacd.run_coacd(
+    coacd.set_log_level("error")
+
+    def run(preprocess: str):
+        return coacd.run_coacd(
             coacd.Mesh(np.asarray(mesh.vertices), np.asarray(mesh.faces)),
             threshold=c.coacd_threshold,
             max_convex_hull=c.coacd_max_hulls,
             seed=int(seed),
+            preprocess_mode=preprocess,
             **dict(c.coacd_options),
         )
+
+    try:
+        # CoACD's preprocessing remeshes the part (a manifold rebuild at `preprocess_resolution`); a closed mesh does
+        # not need it, and it moved tless_10's surface up to 1.5 mm outwards, where the pads then bore on pieces
+        # that stand proud of the part (its two 55.3 mm grasps slipped in every simulation and held without it)
+        closed = mesh.is_watertight and mesh.is_winding_consistent
+        try:
+            parts = run("off" if closed else "auto")
+        except Exception:
+            if not closed:
+                raise
+            parts = run("auto")
     except Exception as exc:  # the decomposition is a best effort: fall back and say so
         return [mesh.convex_hull], "convex-hull", f"convex decomposition failed ({exc}): simulated as the convex hull"
     pieces = []

@@ -555,3 +555,42 @@ def test_a_piece_reaching_into_the_palm_where_the_part_does_not_is_not_flung_out
     flung = physics.simulate_grasp(sim, T, 0.02)
     if depth_mm == 2.5:  # ... and the deeper one out of the fingers
         assert not flung.success
+
+
+def test_a_closed_part_is_decomposed_without_remeshing_so_its_pieces_stay_on_its_surface(monkeypatch):
+    """CoACD's preprocessing rebuilds the mesh at a coarse resolution and moves its surface: on tless_10 up to
+    1.5 mm outwards, where the pads then bore on pieces standing proud of the part. A closed mesh skips it: every
+    piece's vertex lies on the part (remeshed, the ring's stand 0.58 mm out)."""
+    import coacd
+
+    ring = trimesh.creation.annulus(r_min=0.010, r_max=0.030, height=0.020, sections=64)
+    sim = physics.prepare_part(ring, SPEC, mass_kg=0.1)
+    assert sim.geometry == "coacd" and sim.pieces > 1
+    vertices = np.concatenate([np.asarray(h.vertices) for h in sim.hulls])
+    outside = -trimesh.proximity.ProximityQuery(ring).signed_distance(vertices)
+    assert outside.max() < 1e-5
+
+    # which preprocessing each mesh gets: none for a closed one, CoACD's own check for an open one, and CoACD's
+    # own check again when a closed one fails without it
+    modes = []
+    real = coacd.run_coacd
+
+    def recording(mesh, *, preprocess_mode, **kw):
+        modes.append(preprocess_mode)
+        if fail_without and preprocess_mode == "off":
+            raise RuntimeError("no manifold")
+        return real(mesh, preprocess_mode=preprocess_mode, **kw)
+
+    monkeypatch.setattr(coacd, "run_coacd", recording)
+    c = physics.SIM
+    fail_without = False
+    box = trimesh.creation.box(extents=(0.02, 0.02, 0.02))
+    notched = trimesh.util.concatenate([box, box.copy().apply_translation([0.0, 0.0, 0.03])])  # closed, not convex
+    assert physics._decompose_once(notched, c, 0)[1] == "coacd" and modes == ["off"]
+    open_mesh = trimesh.Trimesh(notched.vertices, notched.faces[:-1])  # one face short: not closed
+    modes.clear()
+    physics._decompose_once(open_mesh, c, 0)
+    assert modes == ["auto"]
+    fail_without = True
+    modes.clear()
+    assert physics._decompose_once(notched, c, 0)[1] == "coacd" and modes == ["off", "auto"]
