@@ -206,6 +206,11 @@ def run_part(label: str, part, args, members) -> dict:
             out["sim_s"] = time.perf_counter() - t0
             out["simulated_new"] = len(todo)
             ok = np.array([[r.success for r in g] for g in grid], dtype=bool)  # (k, 1 + members)
+            # rows the judge ran again on its finer decomposition (the pads bore on the coarser one's slack), and
+            # how far outside the part the pads bore in the nominal outcome that counts
+            out["refined"] = sum(g[0].refinements > 0 for g in grid)
+            gaps = [g[0].bearing_gap_mm for g in grid if g[0].bearing_gap_mm is not None]
+            out["max_bearing_gap_mm"] = max(gaps) if gaps else None
             out["nominal"] = int(ok[:, 0].sum())
             out["all"] = int(ok.all(axis=1).sum())
             out["mean_fraction"] = float(ok[:, 1:].mean())
@@ -266,6 +271,9 @@ def run_part(label: str, part, args, members) -> dict:
                     "geometric": int(np.sum(geometric)),
                 }
                 print(f"  {label} {key}: {row[key]}", flush=True)
+    finer = sim._refined or None
+    if finer is not None:
+        row["geometry"] += f", refined {finer.geometry} ({finer.pieces})"
     return row
 
 
@@ -441,7 +449,24 @@ def markdown(rows, members, args, wall_s) -> str:
             f"are held; of those it rejects, {pct(tot['fn'], tot['fn'] + tot['tn'])} are held anyway.",
         ]
     geo = [f"{r['part'].split('/')[-1]} {r['geometry']} {r['prepare_s']:.0f} s" for r in rows]
-    lines += ["", "Collision geometry of the simulation and time to build it: " + "; ".join(geo) + ".", END]
+    lines += ["", "Collision geometry of the simulation and time to build it: " + "; ".join(geo) + "."]
+    refined = [
+        f"{r['part'].split('/')[-1]} {config} {v['refined']}"
+        for r in rows
+        for config, v in r["configs"].items()
+        if v.get("refined")
+    ]
+    gaps = [v["max_bearing_gap_mm"] for r in rows for v in r["configs"].values() if v.get("max_bearing_gap_mm")]
+    lines += [
+        "",
+        "Exported grasps judged on the part's finer decomposition, because their pads bore more than "
+        f"{physics.SIM.bearing_tolerance * 1e3:g} mm outside the part on the first (`SimConstants.bearing_tolerance`"
+        "): "
+        + (", ".join(refined) or "none")
+        + "."
+        + (f" Largest bearing gap left in a nominal outcome: {max(gaps):.2f} mm." if gaps else ""),
+        END,
+    ]
     return "\n".join(lines) + "\n"
 
 

@@ -149,6 +149,13 @@ class SimConstants:
     #: convex decomposition (CoACD): concavity threshold, hull limit and a fast search
     coacd_threshold: float = 0.08
     coacd_max_hulls: int = 24
+    #: the pads must bear on the part, not on the decomposition's slack: a grasp whose pads bear farther than this
+    #: (m) outside the part's own surface (SimResult.bearing_gap_mm) under any perturbation is simulated again on a
+    #: finer decomposition (threshold halved, twice the hulls), at most `coacd_refinements` times. The pieces of a
+    #: grooved part bridge its grooves: the pepper's pads bore up to 1.5 mm outside it at 0.08, within 0.3 mm at
+    #: 0.04 (docs/HOLD.md, "The simulation's part")
+    bearing_tolerance: float = 0.5e-3
+    coacd_refinements: int = 1
     coacd_options: tuple[tuple[str, int], ...] = (
         ("mcts_iterations", 40),
         ("mcts_nodes", 10),
@@ -295,6 +302,14 @@ class SimResult:
     contacts: int  # part-finger contacts at the end of the closing stage
     #: the perturbation this outcome was simulated under (validation_set: the first member that failed), or None
     member: str | None = None
+    #: how far (mm) outside the part's own surface the pads bore once closed: the largest distance of a pad contact
+    #: from the part's surface samples. 0 for a convex part (its one piece is the part); None without contacts on
+    #: both pads or without surface samples (the convex hull as the fallback). A convex decomposition stands proud
+    #: of the part across its concavities; where a pad bears on such a bridge, the simulation judges a grasp on a
+    #: surface the part does not have (docs/HOLD.md, "The simulation's part")
+    bearing_gap_mm: float | None = None
+    #: how many times the part's decomposition was refined for this outcome (SimConstants.coacd_refinements)
+    refinements: int = 0
 
     def to_json(self) -> dict[str, Any]:
         out = {
@@ -331,6 +346,52 @@ class SimPart:
     surface_points: np.ndarray | None = field(default=None, repr=False)
     _variants: dict = field(default_factory=dict, repr=False, compare=False)
     _lock: Any = field(default_factory=threading.Lock, repr=False, compare=False)
+    _surface_tree: Any = field(default=None, repr=False, compare=False)
+    #: the part's mesh and the seed of its decomposition, to build a finer one (refined)
+    mesh: Any = field(default=None, repr=False, compare=False)
+    seed: int = 0
+    #: refinements of the decomposition from the first one (0 for the first)
+    refinements: int = 0
+    _refined: Any = field(default=None, repr=False, compare=False)
+
+    def refined(self) -> SimPart | None:
+        """The same part (mass, inertia, gripper) on a decomposition twice as fine, built once; None when its
+        geometry is not a decomposition, the refinements (SimConstants.coacd_refinements) are used up or the finer
+        decomposition failed."""
+        c = self.constants
+        if self.geometry != "coacd" or self.mesh is None or self.refinements >= c.coacd_refinements:
+            return None
+        with self._lock:
+            if self._refined is None:
+                finer = replace(c, coacd_threshold=c.coacd_threshold / 2, coacd_max_hulls=2 * c.coacd_max_hulls)
+                part = _assemble(
+                    self.mesh,
+                    self.spec,
+                    self.friction,
+                    (self.mass, self.center_of_mass, self.inertia),
+                    self.grip_force,
+                    finer,
+                    self.seed,
+                    surface_points=self.surface_points,
+                )
+                part.refinements = self.refinements + 1
+                self._refined = part if part.geometry == "coacd" else False
+        return self._refined or None
+
+    def surface_distance(self, points: np.ndarray) -> np.ndarray | None:
+        """Distance (m) of object-frame points from the part's surface samples (0 for a convex part, whose pieces
+        are the part; None without samples)."""
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if self.geometry == "convex":
+            return np.zeros(len(points))
+        if self.surface_points is None:
+            return None
+        with self._lock:
+            if self._surface_tree is None:
+                from scipy.spatial import cKDTree
+
+                self._surface_tree = cKDTree(self.surface_points)
+        return self._surface_tree.query(points)[0]
 
     def describe(self) -> dict[str, Any]:
         out = {
@@ -341,6 +402,11 @@ class SimPart:
         }
         if self.note:
             out["note"] = self.note
+        if self._refined:
+            out["refined"] = {
+                "pieces": self._refined.pieces,
+                "coacd_threshold": self._refined.constants.coacd_threshold,
+            }
         return out
 
     def model_for(self, p: Perturbation, *, palm: bool = True) -> Any:
@@ -570,7 +636,6 @@ def prepare_part(
     The part's mass is `mass_kg` (kg; inertia from the mesh's shape, uniform material) or its volume times `density`
     (kg/m^3): exactly one is required. The grip force (N per finger) is `grip_force`, else the gripper's
     `grip_force`; without either the validation is refused. InvalidParameterError on a missing or bad value."""
-    import mujoco
 
     def positive(v) -> bool:
         return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0
@@ -596,9 +661,30 @@ def prepare_part(
     mass, com, inertia, mass_note = _mass_properties(
         mesh, None if density is None else float(density), None if mass_kg is None else float(mass_kg)
     )
+    return _assemble(mesh, spec, mu, (mass, com, inertia), float(force), constants, seed, mass_note=mass_note)
+
+
+def _assemble(
+    mesh: trimesh.Trimesh,
+    spec: GripperSpec,
+    mu: float,
+    mass_properties: tuple,
+    force: float,
+    constants: SimConstants,
+    seed: int,
+    *,
+    mass_note: str | None = None,
+    surface_points: np.ndarray | None = None,
+) -> SimPart:
+    """The SimPart of a checked part: its decomposition under `constants` and the MuJoCo model."""
+    import mujoco
+
+    mass, com, inertia = mass_properties
     pieces, geometry, note = _decompose(mesh, constants, seed)
     notes = [n for n in (note, mass_note) if n]
-    model = mujoco.MjModel.from_xml_string(_xml(pieces, spec, mu, mass, com, inertia, constants, float(force)))
+    model = mujoco.MjModel.from_xml_string(_xml(pieces, spec, mu, mass, com, inertia, constants, force))
+    if geometry == "coacd" and surface_points is None:
+        surface_points = _surface_points(mesh, constants, seed)
     return SimPart(
         model=model,
         spec=spec,
@@ -610,10 +696,12 @@ def prepare_part(
         note="; ".join(notes) or None,
         vertices=np.asarray(mesh.vertices, dtype=np.float64),
         constants=constants,
-        grip_force=float(force),
+        grip_force=force,
         inertia=inertia,
         hulls=pieces,
-        surface_points=_surface_points(mesh, constants, seed) if geometry == "coacd" else None,
+        surface_points=surface_points if geometry == "coacd" else None,
+        mesh=mesh,
+        seed=int(seed),
     )
 
 
@@ -746,6 +834,22 @@ class _Grasp:
                 return True
         return False
 
+    def _bearing_gap_mm(self) -> float | None:
+        """SimResult.bearing_gap_mm in the current state: the pad contacts' largest distance from the part's own
+        surface."""
+        n = self.d.ncon
+        con = self.d.contact
+        b1 = self.m.geom_bodyid[con.geom1[:n]]
+        b2 = self.m.geom_bodyid[con.geom2[:n]]
+        other = np.where(b1 == self.part_body, b2, np.where(b2 == self.part_body, b1, -1))
+        pads = np.isin(other, self.finger_bodies)
+        if not pads.any():
+            return None
+        p, R = self._part_pose()
+        at = (con.pos[:n][pads] - p) @ R  # object frame
+        dist = self.sim.surface_distance(at)
+        return None if dist is None else float(np.max(dist)) * 1e3
+
     def _palm_penetration(self) -> float:
         """The deepest penetration (m, >= 0) of the part's pieces into the palm in the current state."""
         if self.palm_geom < 0:
@@ -764,7 +868,7 @@ class _Grasp:
 
     def run(self) -> SimResult:
         if self.approach_collides():
-            return SimResult(False, "collision", 0.0, 0.0, 0)
+            return SimResult(False, "collision", 0.0, 0.0, 0, refinements=self.sim.refinements)
         self.d.qvel[:] = 0.0
         self.mj.mj_forward(self.m, self.d)
         if self._palm_penetration() > self.c.palm_start_tolerance:
@@ -778,8 +882,10 @@ class _Grasp:
         mj.mj_step(m, d, nstep=max(1, int(round(c.close_time / c.timestep))))
         n0, n1, _ = self._contacts()
         if n0 == 0 or n1 == 0:
-            return SimResult(False, "no_contact", 0.0, 0.0, n0 + n1)
+            return SimResult(False, "no_contact", 0.0, 0.0, n0 + n1, refinements=self.sim.refinements)
         contacts = n0 + n1
+        gap = self._bearing_gap_mm()
+        refined = self.sim.refinements
         p_ref, R_ref = self._part_pose()
         mid_ref = R_ref @ self.midpoint_object + p_ref
         slip = rot = lost = 0.0
@@ -795,10 +901,10 @@ class _Grasp:
             n0, n1, _ = self._contacts()
             lost = lost + dt if (n0 == 0 or n1 == 0) else 0.0
             if slip > c.drop_distance or lost > c.lost_contact_time:
-                return SimResult(False, "dropped", slip * 1e3, rot, contacts)
+                return SimResult(False, "dropped", slip * 1e3, rot, contacts, bearing_gap_mm=gap, refinements=refined)
         if slip > c.slip_limit or rot > c.rotation_limit_deg:
-            return SimResult(False, "slipped", slip * 1e3, rot, contacts)
-        return SimResult(True, None, slip * 1e3, rot, contacts)
+            return SimResult(False, "slipped", slip * 1e3, rot, contacts, bearing_gap_mm=gap, refinements=refined)
+        return SimResult(True, None, slip * 1e3, rot, contacts, bearing_gap_mm=gap, refinements=refined)
 
     def _loads(self, dt: float):
         """Acceleration felt by the part (gravity minus the gripper's acceleration), grasp frame, per interval."""
@@ -880,7 +986,9 @@ def simulate_perturbed(
 ) -> list[list[SimResult]]:
     """Simulate every grasp (poses (n, 4, 4), widths (n,)) under every perturbation (a sequence of p), all pairs in
     one thread pool; `out[i][j]` is grasp i under perturbation j. A grasp holds under the perturbations when every
-    `out[i][j].success`."""
+    `out[i][j].success`. A grasp whose pads bear on the decomposition's slack under any perturbation (bearing gap
+    above SimConstants.bearing_tolerance) is simulated again, under every perturbation, on the part's finer
+    decomposition (SimPart.refined), and those outcomes replace its row."""
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
     widths = np.asarray(widths, dtype=np.float64).reshape(-1)
     keys = np.arange(len(poses)) if keys is None else np.asarray(keys).reshape(-1)
@@ -889,6 +997,22 @@ def simulate_perturbed(
     members = list(perturbations)
     if n == 0 or not members:
         return [[] for _ in range(n)]
+    out = _simulate_all(sim, poses, widths, members, seed, keys, workers, inside)
+    limit_mm = sim.constants.bearing_tolerance * 1e3
+    while True:
+        rows = [i for i, row in enumerate(out) if any((r.bearing_gap_mm or 0.0) > limit_mm for r in row)]
+        finer = sim.refined() if rows else None
+        if finer is None:
+            return out
+        again = _simulate_all(finer, poses[rows], widths[rows], members, seed, keys[rows], workers, inside[rows])
+        for i, row in zip(rows, again, strict=True):
+            out[i] = row
+        sim = finer
+
+
+def _simulate_all(sim, poses, widths, members, seed, keys, workers, inside) -> list[list[SimResult]]:
+    """simulate_perturbed on one geometry: every grasp under every member, in one thread pool."""
+    n = len(poses)
     for p in members:  # build the perturbed models before the threads share them
         sim.model_for(p)
     jobs = [(i, j) for i in range(n) for j in range(len(members))]

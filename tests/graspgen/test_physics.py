@@ -594,3 +594,75 @@ def test_a_closed_part_is_decomposed_without_remeshing_so_its_pieces_stay_on_its
     fail_without = True
     modes.clear()
     assert physics._decompose_once(notched, c, 0)[1] == "coacd" and modes == ["off", "auto"]
+
+
+def test_the_simulation_reports_how_far_outside_the_part_the_pads_bear(monkeypatch, box_sim):
+    """A 20 mm web gripped across x at the floor of a 26 mm wide, 2 mm deep channel between rims: pieces that are
+    the part let the pads reach the floor (gap about the surface samples' spacing); the convex hull bridges the
+    channel, and the pads bear 2 mm outside the part, which the result says. A convex part is its own piece."""
+    web = trimesh.creation.box(extents=(0.020, 0.032, 0.020))
+    rims = []
+    for sx in (-1.0, 1.0):
+        for sy in (-1.0, 1.0):
+            rim = trimesh.creation.box(extents=(0.002, 0.003, 0.020))
+            rims.append(rim.apply_translation([sx * 0.011, sy * 0.0145, 0.0]))
+    part = trimesh.util.concatenate([web, *rims])
+    T = _pose([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], 0.0)
+    assert np.allclose(T[:3, :3], np.eye(3), atol=1e-9)  # the pads' 20 mm width along y, inside the channel
+
+    def bearing(pieces) -> physics.SimResult:
+        monkeypatch.setattr(physics, "_decompose", lambda mesh, c, seed: (pieces, "coacd", None))
+        sim = physics.prepare_part(part, SPEC, mass_kg=0.1)
+        return physics.simulate_grasp(sim, T, 0.020)
+
+    exact = bearing([web, *rims])
+    assert exact.success and exact.bearing_gap_mm < 0.3, exact
+    bridged = bearing([part.convex_hull])
+    assert bridged.contacts > 0 and 1.7 < bridged.bearing_gap_mm < 2.3, bridged
+    on_box = physics.simulate_grasp(box_sim, _pose([0.0, 0.0, 0.0], [1.0, 0.0, 0.0]), 0.04)
+    assert on_box.success and on_box.bearing_gap_mm == 0.0 and box_sim.refined() is None
+
+
+def test_a_grasp_whose_pads_bear_on_the_decompositions_slack_is_simulated_again_on_a_finer_one(monkeypatch):
+    """The channel part above: its first decomposition bridges the channel (the convex hull), the one at half the
+    threshold does not. simulate_perturbed runs the grasp again, under every member, on the finer one, and the pads
+    then bear on the part; a grasp that bears on the part is not run again, and without refinements the bridged
+    outcome stays."""
+    import dataclasses
+
+    web = trimesh.creation.box(extents=(0.020, 0.032, 0.020))
+    rims = [
+        trimesh.creation.box(extents=(0.002, 0.003, 0.020)).apply_translation([sx * 0.011, sy * 0.0145, 0.0])
+        for sx in (-1.0, 1.0)
+        for sy in (-1.0, 1.0)
+    ]
+    part = trimesh.util.concatenate([web, *rims])
+    c = physics.SIM
+    calls = []
+
+    def decompose(mesh, constants, seed):
+        calls.append((constants.coacd_threshold, constants.coacd_max_hulls))
+        if constants.coacd_threshold >= c.coacd_threshold:
+            return [mesh.convex_hull], "coacd", None
+        return [web, *rims], "coacd", None
+
+    monkeypatch.setattr(physics, "_decompose", decompose)
+    T = _pose([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], 0.0)
+    members = [physics.NOMINAL, physics.Perturbation("mass x1.5", mass_scale=1.5)]
+    sim = physics.prepare_part(part, SPEC, mass_kg=0.1)
+    (row,) = physics.simulate_perturbed(sim, T[None], np.array([0.020]), members)
+    assert calls == [(c.coacd_threshold, c.coacd_max_hulls), (c.coacd_threshold / 2, 2 * c.coacd_max_hulls)]
+    assert all(r.refinements == 1 and r.bearing_gap_mm < 0.3 and r.success for r in row), row
+    assert sim.describe()["refined"] == {"pieces": 5, "coacd_threshold": c.coacd_threshold / 2}
+    assert sim.refined().refined() is None  # one refinement by default
+
+    # the same grasp's pads on the finer part's own decomposition already bear on it: not run again
+    finer = sim.refined()
+    (row,) = physics.simulate_perturbed(finer, T[None], np.array([0.020]), members)
+    assert len(calls) == 2 and all(r.refinements == 1 for r in row)
+
+    calls.clear()
+    off = dataclasses.replace(c, coacd_refinements=0)
+    sim = physics.prepare_part(part, SPEC, mass_kg=0.1, constants=off)
+    (row,) = physics.simulate_perturbed(sim, T[None], np.array([0.020]), members)
+    assert len(calls) == 1 and all(r.refinements == 0 and r.bearing_gap_mm > 1.7 for r in row), row
