@@ -29,7 +29,9 @@ with its no-slip iterations: without them the soft contacts let a held part cree
 sustained load inside the cone (grasps turned 10-13 degrees in a second), which static friction does not.
 
 Collision geometry of the part: a convex decomposition (CoACD), or the part itself when it is convex; if the
-decomposition is unavailable or fails, the convex hull, and `SimPart.note` says so. The centre of mass and the shape
+decomposition is unavailable or fails, the convex hull, and `SimPart.note` says so. A grasp whose pads bear on the
+decomposition's slack (a piece bridging a groove: `SimResult.bearing_gap_mm` above `bearing_tolerance`) runs again on
+a decomposition twice as fine (`SimPart.refined`, in `simulate_perturbed`). The centre of mass and the shape
 of the inertia come from the mesh volume (trimesh's mass properties), scaled to the part's real mass (`mass_kg`) or to
 a density; the grip force is the gripper's (`GripperSpec.grip_force`) or given. Neither has a default: a validation
 with a guessed mass or force tells nothing about the real pick.
