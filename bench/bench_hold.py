@@ -271,9 +271,9 @@ def run_part(label: str, part, args, members) -> dict:
                     "geometric": int(np.sum(geometric)),
                 }
                 print(f"  {label} {key}: {row[key]}", flush=True)
-    finer = sim._refined or None
+    finer = sim.describe().get("refined")
     if finer is not None:
-        row["geometry"] += f", refined {finer.geometry} ({finer.pieces})"
+        row["geometry"] += f", refined coacd ({finer['pieces']})"
     return row
 
 

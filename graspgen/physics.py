@@ -377,6 +377,7 @@ class SimPart:
                     surface_points=self.surface_points,
                 )
                 part.refinements = self.refinements + 1
+                part._surface_tree = self._surface_tree  # the same samples: no second tree
                 self._refined = part if part.geometry == "coacd" else False
         return self._refined or None
 
@@ -781,19 +782,23 @@ class _Grasp:
     def _part_pose(self) -> tuple[np.ndarray, np.ndarray]:
         return self.d.xpos[self.part_body].copy(), self.d.xmat[self.part_body].reshape(3, 3).copy()
 
-    def _contacts(self) -> tuple[int, int, float]:
-        """Contacts of the part with finger 0, finger 1, and the deepest penetration (m, >= 0)."""
+    def _part_contacts(self) -> tuple[np.ndarray, np.ndarray]:
+        """Which of the current contacts touch the part (mask over the first ncon), and the other body of each."""
         n = self.d.ncon
-        if n == 0:
-            return 0, 0, 0.0
         con = self.d.contact
         b1 = self.m.geom_bodyid[con.geom1[:n]]
         b2 = self.m.geom_bodyid[con.geom2[:n]]
         mine = (b1 == self.part_body) | (b2 == self.part_body)
+        return mine, np.where(b1 == self.part_body, b2, b1)[mine]
+
+    def _contacts(self) -> tuple[int, int, float]:
+        """Contacts of the part with finger 0, finger 1, and the deepest penetration (m, >= 0)."""
+        if self.d.ncon == 0:
+            return 0, 0, 0.0
+        mine, other = self._part_contacts()
         if not mine.any():
             return 0, 0, 0.0
-        other = np.where(b1 == self.part_body, b2, b1)[mine]
-        deepest = max(0.0, -float(np.min(con.dist[:n][mine])))
+        deepest = max(0.0, -float(np.min(self.d.contact.dist[: self.d.ncon][mine])))
         return int(np.sum(other == self.finger_bodies[0])), int(np.sum(other == self.finger_bodies[1])), deepest
 
     # -- stages ----------------------------------------------------------------------------------------------------
@@ -839,16 +844,12 @@ class _Grasp:
     def _bearing_gap_mm(self) -> float | None:
         """SimResult.bearing_gap_mm in the current state: the pad contacts' largest distance from the part's own
         surface."""
-        n = self.d.ncon
-        con = self.d.contact
-        b1 = self.m.geom_bodyid[con.geom1[:n]]
-        b2 = self.m.geom_bodyid[con.geom2[:n]]
-        other = np.where(b1 == self.part_body, b2, np.where(b2 == self.part_body, b1, -1))
+        mine, other = self._part_contacts()
         pads = np.isin(other, self.finger_bodies)
         if not pads.any():
             return None
         p, R = self._part_pose()
-        at = (con.pos[:n][pads] - p) @ R  # object frame
+        at = (self.d.contact.pos[: self.d.ncon][mine][pads] - p) @ R  # object frame
         dist = self.sim.surface_distance(at)
         return None if dist is None else float(np.max(dist)) * 1e3
 

@@ -596,17 +596,23 @@ def test_a_closed_part_is_decomposed_without_remeshing_so_its_pieces_stay_on_its
     assert physics._decompose_once(notched, c, 0)[1] == "coacd" and modes == ["off", "auto"]
 
 
+def _channel_part() -> tuple[list[trimesh.Trimesh], trimesh.Trimesh]:
+    """A 20 mm web (x) with 2 mm rims at both ends of each x face: a 26 mm wide, 2 mm deep channel on either side.
+    Returns its exact convex pieces (web, then the four rims) and the part."""
+    web = trimesh.creation.box(extents=(0.020, 0.032, 0.020))
+    rims = [
+        trimesh.creation.box(extents=(0.002, 0.003, 0.020)).apply_translation([sx * 0.011, sy * 0.0145, 0.0])
+        for sx in (-1.0, 1.0)
+        for sy in (-1.0, 1.0)
+    ]
+    return [web, *rims], trimesh.util.concatenate([web, *rims])
+
+
 def test_the_simulation_reports_how_far_outside_the_part_the_pads_bear(monkeypatch, box_sim):
     """A 20 mm web gripped across x at the floor of a 26 mm wide, 2 mm deep channel between rims: pieces that are
     the part let the pads reach the floor (gap about the surface samples' spacing); the convex hull bridges the
     channel, and the pads bear 2 mm outside the part, which the result says. A convex part is its own piece."""
-    web = trimesh.creation.box(extents=(0.020, 0.032, 0.020))
-    rims = []
-    for sx in (-1.0, 1.0):
-        for sy in (-1.0, 1.0):
-            rim = trimesh.creation.box(extents=(0.002, 0.003, 0.020))
-            rims.append(rim.apply_translation([sx * 0.011, sy * 0.0145, 0.0]))
-    part = trimesh.util.concatenate([web, *rims])
+    exact_pieces, part = _channel_part()
     T = _pose([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], 0.0)
     assert np.allclose(T[:3, :3], np.eye(3), atol=1e-9)  # the pads' 20 mm width along y, inside the channel
 
@@ -615,7 +621,7 @@ def test_the_simulation_reports_how_far_outside_the_part_the_pads_bear(monkeypat
         sim = physics.prepare_part(part, SPEC, mass_kg=0.1)
         return physics.simulate_grasp(sim, T, 0.020)
 
-    exact = bearing([web, *rims])
+    exact = bearing(exact_pieces)
     assert exact.success and exact.bearing_gap_mm < 0.3, exact
     bridged = bearing([part.convex_hull])
     assert bridged.contacts > 0 and 1.7 < bridged.bearing_gap_mm < 2.3, bridged
@@ -630,13 +636,7 @@ def test_a_grasp_whose_pads_bear_on_the_decompositions_slack_is_simulated_again_
     outcome stays."""
     import dataclasses
 
-    web = trimesh.creation.box(extents=(0.020, 0.032, 0.020))
-    rims = [
-        trimesh.creation.box(extents=(0.002, 0.003, 0.020)).apply_translation([sx * 0.011, sy * 0.0145, 0.0])
-        for sx in (-1.0, 1.0)
-        for sy in (-1.0, 1.0)
-    ]
-    part = trimesh.util.concatenate([web, *rims])
+    exact_pieces, part = _channel_part()
     c = physics.SIM
     calls = []
 
@@ -644,7 +644,7 @@ def test_a_grasp_whose_pads_bear_on_the_decompositions_slack_is_simulated_again_
         calls.append((constants.coacd_threshold, constants.coacd_max_hulls))
         if constants.coacd_threshold >= c.coacd_threshold:
             return [mesh.convex_hull], "coacd", None
-        return [web, *rims], "coacd", None
+        return exact_pieces, "coacd", None
 
     monkeypatch.setattr(physics, "_decompose", decompose)
     T = _pose([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], 0.0)
