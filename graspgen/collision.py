@@ -38,6 +38,17 @@ Tried and not kept (work counters of free_rolls_stats, deterministic, and CPU ti
 at 10,000 points): the palm's ball test at the open rolls only instead of at every roll (within the noise); the
 memo's grid widened by the palm key's offset, and finer memo cells (_MEMO_H 2 or 1): palm work -20 % on the ring
 but as many more memo tests, within 2 % in all; _FINGER_ANGULAR 1 or 8 (finger work within 1 %).
+Eighth session (the thick ring's 1,095,172 pairs of (a)-(c), in-process A/B against the previous kernel, runs
+interleaved; where the palm's work goes: on the 400,025 candidates that keep a free roll, the fingers leave 15.6 of
+16 rolls open and the palm, with its approach, blocks 14.4 of them: three quarters of their time): the palm's
+per-roll node tests branch-free over every roll (18 % slower: the branchy loop stops at the first roll the node
+reaches); the approach cut per candidate to the farthest corner of the part's boxes from the axis (palm nodes
+27.0 -> 26.9); the palm walk before the fingers' (within the noise, up to 6 % slower); _CACHE 16, 32, 64 (walk
+work -10 to -45 % but 2-8x the cache tests: within the noise on the ordered stream); _LEAF 16 or 64 (19-20 %
+slower); stopping the palm's walk at 2 open rolls and leaving them to the mesh-exact check (its triangles settle a
+blocked roll at about 4x a point's cost: 6 % slower in all). A node-visit budget of 40 per walk, the rest left to
+the mesh-exact check, was 8 % faster in one run (point and mesh tests together); not kept: the free rolls would
+then be the triangles' answer alone, not also the points'.
 """
 
 from __future__ import annotations
@@ -389,14 +400,15 @@ def _point_mask(X, Y, Z, p, F, reg, r0, r1, xr, cos_k, sin_k, half, gfac, todo):
                         if _in_rect(y1, z1, hy, zlo, zhi):
                             mask |= b1
         else:
+            # every roll at once, branch-free (vectorised), then the rolls still open: the palm is tested at most
+            # rolls (its region is not symmetric under a half turn), and the per-roll branches cost more
+            hit = np.uint64(0)
             for k in range(cos_k.shape[0]):
-                bit = np.uint64(1) << np.uint64(k)
-                if not (left & bit):
-                    continue
                 y = y0 * cos_k[k] + z0 * sin_k[k]
                 z = -y0 * sin_k[k] + z0 * cos_k[k]
-                if _in_rect(y, z, hy, zlo, zhi):
-                    mask |= bit
+                in_k = (abs(y) <= hy) & (z >= zlo) & (z <= zhi)
+                hit |= np.uint64(in_k) << np.uint64(k)
+            mask |= hit & left
         mask &= todo
         if mask == todo:
             return todo
