@@ -46,9 +46,10 @@ reaches); the approach cut per candidate to the farthest corner of the part's bo
 27.0 -> 26.9); the palm walk before the fingers' (within the noise, up to 6 % slower); _CACHE 16, 32, 64 (walk
 work -10 to -45 % but 2-8x the cache tests: within the noise on the ordered stream); _LEAF 16 or 64 (19-20 %
 slower); stopping the palm's walk at 2 open rolls and leaving them to the mesh-exact check (its triangles settle a
-blocked roll at about 4x a point's cost: 6 % slower in all). A node-visit budget of 40 per walk, the rest left to
-the mesh-exact check, was 8 % faster in one run (point and mesh tests together); not kept: the free rolls would
-then be the triangles' answer alone, not also the points'.
+blocked roll at about 4x a point's cost: 6 % slower in all). A node-visit budget per walk, the rest left to the
+mesh-exact check (point and mesh tests together, same final masks on the ring): 40 nodes 8 % faster in one run,
+45 nodes 20 % faster in one run of 5 rounds and 4 % in the next of 8 (within the noise); not kept: the free rolls
+would then be the triangles' answer alone, not also the points'.
 """
 
 from __future__ import annotations
