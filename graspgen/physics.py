@@ -47,7 +47,8 @@ import math
 import os
 import threading
 from collections import OrderedDict
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
@@ -986,12 +987,18 @@ def simulate_perturbed(
     keys: np.ndarray | None = None,
     workers: int | None = None,
     inside: np.ndarray | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> list[list[SimResult]]:
     """Simulate every grasp (poses (n, 4, 4), widths (n,)) under every perturbation (a sequence of p), all pairs in
     one thread pool; `out[i][j]` is grasp i under perturbation j. A grasp holds under the perturbations when every
     `out[i][j].success`. A grasp whose pads bear on the decomposition's slack under any perturbation (bearing gap
     above SimConstants.bearing_tolerance) is simulated again, under every perturbation, on the part's finer
-    decomposition (SimPart.refined), and those outcomes replace its row."""
+    decomposition (SimPart.refined), and those outcomes replace its row.
+
+    `progress(done, total)`, if given, is called in the calling thread after each simulation ends, and before the
+    finer decomposition is built (total grows by the simulations that adds). If it raises, the simulations not yet
+    started are dropped, the running ones end, and the exception propagates (a cancelled job stops within one
+    simulation, not after all of them)."""
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
     widths = np.asarray(widths, dtype=np.float64).reshape(-1)
     keys = np.arange(len(poses)) if keys is None else np.asarray(keys).reshape(-1)
@@ -1000,21 +1007,33 @@ def simulate_perturbed(
     members = list(perturbations)
     if n == 0 or not members:
         return [[] for _ in range(n)]
-    out = _simulate_all(sim, poses, widths, members, seed, keys, workers, inside)
+    count = [0, n * len(members)]  # simulations done, and to do
+
+    def step(done: int) -> None:
+        if progress is not None:
+            progress(count[0] + done, count[1])
+
+    out = _simulate_all(sim, poses, widths, members, seed, keys, workers, inside, step)
+    count[0] += n * len(members)
     limit_mm = sim.constants.bearing_tolerance * 1e3
     while True:
         rows = [i for i, row in enumerate(out) if any((r.bearing_gap_mm or 0.0) > limit_mm for r in row)]
+        if rows:
+            count[1] += len(rows) * len(members)
+            step(0)
         finer = sim.refined() if rows else None
         if finer is None:
             return out
-        again = _simulate_all(finer, poses[rows], widths[rows], members, seed, keys[rows], workers, inside[rows])
+        again = _simulate_all(finer, poses[rows], widths[rows], members, seed, keys[rows], workers, inside[rows], step)
+        count[0] += len(rows) * len(members)
         for i, row in zip(rows, again, strict=True):
             out[i] = row
         sim = finer
 
 
-def _simulate_all(sim, poses, widths, members, seed, keys, workers, inside) -> list[list[SimResult]]:
-    """simulate_perturbed on one geometry: every grasp under every member, in one thread pool."""
+def _simulate_all(sim, poses, widths, members, seed, keys, workers, inside, step) -> list[list[SimResult]]:
+    """simulate_perturbed on one geometry: every grasp under every member, in one thread pool; step(k) after the
+    k-th simulation ends (in the calling thread)."""
     n = len(poses)
     for p in members:  # build the perturbed models before the threads share them
         sim.model_for(p)
@@ -1027,11 +1046,22 @@ def _simulate_all(sim, poses, widths, members, seed, keys, workers, inside) -> l
         )
 
     workers = min(len(jobs), workers or os.cpu_count() or 1)
+    flat: list[SimResult | None] = [None] * len(jobs)
     if workers <= 1:
-        flat = [one(job) for job in jobs]
+        for k, job in enumerate(jobs):
+            flat[k] = one(job)
+            step(k + 1)
     else:
         with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="graspgen-sim") as pool:
-            flat = list(pool.map(one, jobs))
+            futures = {pool.submit(one, job): k for k, job in enumerate(jobs)}
+            try:
+                for done, fut in enumerate(as_completed(futures), start=1):
+                    flat[futures[fut]] = fut.result()
+                    step(done)
+            except BaseException:
+                for fut in futures:
+                    fut.cancel()
+                raise
     m = len(members)
     return [flat[i * m : (i + 1) * m] for i in range(n)]
 

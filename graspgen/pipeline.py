@@ -900,8 +900,12 @@ def _validate(cands, labels, selected, clusters, spec, mu, params, extras: _Extr
     report("validate", 0.1)
     widths = cands.widths
     checks = physics.validation_set(mu)
-    run = lambda idx: physics.first_failures(  # noqa: E731
-        physics.simulate_perturbed(
+    limit = extras.options.repair_limit
+
+    def run(idx: np.ndarray, lo: float, hi: float) -> list:
+        """The first failure (or the success) of each grasp idx; progress runs from lo to hi meanwhile (each
+        simulation reports, so a cancel or the time limit stops the stage within one simulation)."""
+        sims = physics.simulate_perturbed(
             sim_part,
             _poses(cands, idx),
             widths[idx],
@@ -910,10 +914,13 @@ def _validate(cands, labels, selected, clusters, spec, mu, params, extras: _Extr
             keys=idx,
             workers=extras.options.sim_workers,
             inside=cands.inside[idx],
-        ),
-        checks,
-    )
-    results = run(selected)
+            progress=lambda done, total: report("validate", lo + (hi - lo) * done / max(total, 1)),
+        )
+        return physics.first_failures(sims, checks)
+
+    # the first pass gets half of the stage's progress after the part's model, the repair rounds the rest
+    first_hi = 0.55 if limit else 1.0
+    results = run(selected, 0.1, first_hi)
     first = list(results)
     simulated = len(selected)
     final = selected.copy()
@@ -933,10 +940,10 @@ def _validate(cands, labels, selected, clusters, spec, mu, params, extras: _Extr
             break
         idx = np.array([alternatives[r][j] for r in rows], dtype=np.int64)
         simulated += len(idx)
-        for r, m, res in zip(rows, idx, run(idx), strict=True):
+        lo = first_hi + (1.0 - first_hi) * j / limit
+        for r, m, res in zip(rows, idx, run(idx, lo, lo + (1.0 - first_hi) / limit), strict=True):
             if res.success:
                 final[r], results[r] = m, res
-        report("validate", 0.1 + 0.9 * (j + 1) / extras.options.repair_limit)
     report("validate", 1.0)
     import mujoco
 

@@ -165,7 +165,7 @@ def test_failed_medoids_are_repaired_from_their_own_cluster(monkeypatch):
     medoids = set(plain.candidates.medoids.tolist())
     calls = []
 
-    def fake(sim, poses, widths, members, *, seed=0, keys=None, workers=None, inside=None):
+    def fake(sim, poses, widths, members, *, seed=0, keys=None, workers=None, inside=None, progress=None):
         calls.append(list(keys))
         return [
             [physics.SimResult(False, "slipped", 9.0, 0.0, 2)]
@@ -189,7 +189,7 @@ def test_failed_medoids_are_repaired_from_their_own_cluster(monkeypatch):
 def test_repair_gives_up_after_the_limit(monkeypatch):
     box = trimesh.creation.box(extents=(0.04, 0.03, 0.02))
 
-    def fail(sim, poses, widths, members, *, seed=0, keys=None, workers=None, inside=None):
+    def fail(sim, poses, widths, members, *, seed=0, keys=None, workers=None, inside=None, progress=None):
         return [[physics.SimResult(False, "dropped", 30.0, 0.0, 0)] for _ in keys]
 
     monkeypatch.setattr(physics, "simulate_perturbed", fail)
@@ -421,6 +421,63 @@ def test_simulate_perturbed_matches_one_by_one_and_keeps_the_placement_error(box
             assert grid[i][j] == one
     assert physics.simulate_grasps(box_sim, poses, widths, seed=3, keys=[5, 9]) == [row[0] for row in grid]
     assert grid[0][0] != grid[0][2]  # the turn moves the part a little on its pads
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_simulate_perturbed_reports_each_simulation_and_stops_when_the_report_raises(box_sim, monkeypatch, workers):
+    poses = np.stack([_pose([0, 0, 0], [1, 0, 0]), _pose([0.005, 0, 0], [0, 1, 0]), _pose([0, 0.004, 0], [1, 0, 0])])
+    widths = np.array([0.04, 0.03, 0.04])
+    members = [physics.NOMINAL, physics.Perturbation("f", friction=0.4), physics.Perturbation("g", gravity=(0, 1, 0))]
+    seen = []
+    grid = physics.simulate_perturbed(
+        box_sim, poses, widths, members, workers=workers, progress=lambda d, t: seen.append((d, t))
+    )
+    assert seen == [(k, 9) for k in range(1, 10)]  # a convex box: nothing to simulate again on finer pieces
+    assert grid == physics.simulate_perturbed(box_sim, poses, widths, members, workers=workers)
+
+    started = []
+    real = physics.simulate_grasp
+    monkeypatch.setattr(physics, "simulate_grasp", lambda *a, **k: started.append(1) or real(*a, **k))
+
+    def cancel(done, total):
+        raise RuntimeError("cancelled")
+
+    with pytest.raises(RuntimeError, match="cancelled"):
+        physics.simulate_perturbed(box_sim, poses, widths, members, workers=workers, progress=cancel)
+    # the first report came after the first simulation: the ones not yet started were dropped
+    assert 1 <= len(started) <= 2 * workers < 9
+
+
+def test_a_cancel_during_validation_stops_within_the_simulations():
+    box = trimesh.creation.box(extents=(0.04, 0.03, 0.02))
+    seen = []
+
+    def cancel(stage, fraction):
+        seen.append((stage, fraction))
+        if stage == "validate" and fraction > 0.1:
+            raise graspgen.Cancelled()
+
+    with pytest.raises(graspgen.Cancelled):
+        graspgen.generate(box, GRIPPER, units="m", points=600, k1=2, k2=1, validate=True, mass_kg=0.2, progress=cancel)
+    validate = [f for s, f in seen if s == "validate"]
+    assert validate[:2] == [0.0, 0.1] and 0.1 < validate[-1] < 0.55  # stopped in the first pass, not after it
+
+    seen.clear()
+    gs = graspgen.generate(
+        box,
+        GRIPPER,
+        units="m",
+        points=600,
+        k1=2,
+        k2=1,
+        validate=True,
+        mass_kg=0.2,
+        progress=lambda s, f: seen.append((s, f)),
+    )
+    validate = [f for s, f in seen if s == "validate"]
+    assert len(gs.grasps) == 2
+    assert validate == sorted(validate) and validate[-1] == 1.0
+    assert len([f for f in validate if 0.1 < f < 1.0]) >= 2 * len(physics.validation_set(0.5))  # one per simulation
 
 
 def test_generate_refuses_validation_without_mass_or_grip_force():
