@@ -457,23 +457,18 @@ def test_a_cancel_during_validation_stops_within_the_simulations():
         if stage == "validate" and fraction > 0.1:
             raise graspgen.Cancelled()
 
+    def run(progress):
+        return graspgen.generate(
+            box, GRIPPER, units="m", points=600, k1=2, k2=1, validate=True, mass_kg=0.2, progress=progress
+        )
+
     with pytest.raises(graspgen.Cancelled):
-        graspgen.generate(box, GRIPPER, units="m", points=600, k1=2, k2=1, validate=True, mass_kg=0.2, progress=cancel)
+        run(cancel)
     validate = [f for s, f in seen if s == "validate"]
     assert validate[:2] == [0.0, 0.1] and 0.1 < validate[-1] < 0.55  # stopped in the first pass, not after it
 
     seen.clear()
-    gs = graspgen.generate(
-        box,
-        GRIPPER,
-        units="m",
-        points=600,
-        k1=2,
-        k2=1,
-        validate=True,
-        mass_kg=0.2,
-        progress=lambda s, f: seen.append((s, f)),
-    )
+    gs = run(lambda s, f: seen.append((s, f)))
     validate = [f for s, f in seen if s == "validate"]
     assert len(gs.grasps) == 2
     assert validate == sorted(validate) and validate[-1] == 1.0
