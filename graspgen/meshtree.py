@@ -36,6 +36,15 @@ than the tests they save); testing the fingers once for rolls k and k + R/2 (the
 within the noise. After the cut to the node's slab and the oriented boxes (same benchmark): the fingers' per-roll
 node tests at every node, not only at the leaves (ring +50 % in the walk); leaves of 2 or 8 triangles (2 within
 the noise, 8 40 % slower on the ring).
+Ninth session (the ring's 393,646 candidates as the pipeline passes them, 3.24 open rolls each; work counters in a
+throwaway copy of the kernel): the fingers are three quarters of the check (0.42 of 0.55 s), and their cost is the
+walk, not the triangles: 81 node visits per candidate end in 0.6 triangle tests. It is a finger in the ring's
+hole, where the whole inner wall lies within the finger's slab and radial band and only the per-roll tests at the
+leaves turn it away. Per-roll node tests for the fingers above the leaves, when at most L rolls are open: L = 1,
+2, 4, 16 gave 1.02, 1.07, 1.43, 1.49x the time (visits 83.6 down to 76.6 at best). Splitting the tree along
+(centroid, normal) where that gives thinner children, as collision.py's point tree does: ring 81.3 visits instead
+of 83.6 and 0.98x the time, tless_04 0.95x, at 1.6x the build time. Not kept, because neither gain is above the
+noise of the whole run.
 """
 
 from __future__ import annotations
