@@ -768,6 +768,187 @@ def _cell(grid, x, y, z):
     return (i * ny + j) * nz + k
 
 
+@njit(cache=True, error_model="numpy")
+def _chunk(
+    lo,
+    hi,
+    from_pairs,
+    mids,
+    axes,
+    widths,
+    inside,
+    P,
+    pi,
+    pj,
+    X,
+    Y,
+    Z,
+    nodes,
+    leaves,
+    reg,
+    model_f,
+    cos_k,
+    sin_k,
+    half,
+    gfac,
+    full,
+    switch,
+    tmemo,
+    caches,
+    cache_pos,
+    grid,
+    out,
+    st,
+):
+    """The free rolls of candidates lo..hi-1 into out (a unit of _free_rolls_kernel's parallel work), with the
+    thread's memo and recent blockers (caches, cache_pos). Its own function, called from the parallel loop: in the
+    loop's body numba compiled the kernel in 67-72 s, about half of the package's cold start, and 47-51 s so
+    (interleaved runs on an empty cache), at the same speed (in-process A/B on the ring's and tless_04's pairs:
+    median ratios 0.98-1.04, same masks). Its working arrays (stack, frame, x ranges) are its own: with them
+    passed in per candidate, the same code ran 22 % slower."""
+    nr = reg.shape[0]
+    stack = np.empty(128, dtype=np.int64)
+    F = np.empty(12)
+    xr = np.empty((nr, 2))
+    for r in range(2, nr):
+        xr[r, 0] = -reg[r, _PX]
+        xr[r, 1] = reg[r, _PX]
+    for q in range(lo, hi):
+        if from_pairs:
+            # numpy's arithmetic for 0.5 (p_i + p_j), d / |d| and |d|, bit for bit (the squares are added
+            # in numpy's order), so both entry points give the same masks
+            a, b = pi[q], pj[q]
+            dx, dy, dz = P[b, 0] - P[a, 0], P[b, 1] - P[a, 1], P[b, 2] - P[a, 2]
+            w = np.sqrt(dx * dx + dy * dy + dz * dz)
+            ax, ay, az = dx / w, dy / w, dz / w
+            F[0] = 0.5 * (P[a, 0] + P[b, 0])
+            F[1] = 0.5 * (P[a, 1] + P[b, 1])
+            F[2] = 0.5 * (P[a, 2] + P[b, 2])
+        else:
+            w = widths[q]
+            ax, ay, az = axes[q, 0], axes[q, 1], axes[q, 2]
+            F[0], F[1], F[2] = mids[q, 0], mids[q, 1], mids[q, 2]
+        yx, yy, yz, zx, zy, zz = _basis(ax, ay, az, switch)
+        F[3], F[4], F[5] = ax, ay, az
+        F[6], F[7], F[8] = yx, yy, yz
+        F[9], F[10], F[11] = zx, zy, zz
+        _x_ranges(xr, inside[q], w, model_f)
+        hw = 0.5 * w
+        cell0 = _cell(grid, F[0] - hw * ax, F[1] - hw * ay, F[2] - hw * az)
+        cell1 = _cell(grid, F[0] + hw * ax, F[1] + hw * ay, F[2] + hw * az)
+        # the remembered blockers first (fingers, then palm), inlined: most candidates end there without a
+        # call; then the tree (fingers, then palm). The fingers are small regions and settle most
+        # candidates. The calls are spelled out: with their constant arguments the compiler specialises
+        # each (one call in a loop over both measured 15-25 % slower)
+        blocked, cache_pos[0] = _probe(
+            F,
+            X,
+            Y,
+            Z,
+            reg,
+            0,
+            2,
+            xr,
+            cos_k,
+            sin_k,
+            half,
+            gfac,
+            full,
+            True,
+            caches[0],
+            cache_pos[0],
+            tmemo,
+            grid,
+            cell0,
+            cell1,
+            st,
+        )
+        if blocked != full and nr > 2:
+            more, cache_pos[1] = _probe(
+                F,
+                X,
+                Y,
+                Z,
+                reg,
+                2,
+                nr,
+                xr,
+                cos_k,
+                sin_k,
+                half,
+                gfac,
+                full & ~blocked,
+                False,
+                caches[1],
+                cache_pos[1],
+                tmemo,
+                grid,
+                -1,
+                -1,
+                st,
+            )
+            blocked |= more
+        if blocked != full:
+            more, cache_pos[0] = _walk(
+                F,
+                X,
+                Y,
+                Z,
+                nodes,
+                leaves,
+                reg,
+                0,
+                2,
+                xr,
+                cos_k,
+                sin_k,
+                half,
+                gfac,
+                full & ~blocked,
+                True,
+                stack,
+                caches[0],
+                cache_pos[0],
+                tmemo,
+                grid,
+                cell0,
+                cell1,
+                st,
+            )
+            blocked |= more
+        if blocked != full and nr > 2:
+            more, cache_pos[1] = _walk(
+                F,
+                X,
+                Y,
+                Z,
+                nodes,
+                leaves,
+                reg,
+                2,
+                nr,
+                xr,
+                cos_k,
+                sin_k,
+                half,
+                gfac,
+                full & ~blocked,
+                False,
+                stack,
+                caches[1],
+                cache_pos[1],
+                tmemo,
+                grid,
+                -1,
+                -1,
+                st,
+            )
+            blocked |= more
+        free = ~blocked & full
+        for k in range(out.shape[1]):
+            out[q, k] = (free >> np.uint64(k)) & np.uint64(1) != np.uint64(0)
+
+
 @njit(parallel=True, cache=True, error_model="numpy")
 def _free_rolls_kernel(
     mids,
@@ -799,156 +980,45 @@ def _free_rolls_kernel(
     m = inside.shape[0]
     from_pairs = pi.shape[0] > 0  # the candidates as point index pairs (pi, pj) into P, not as mids/axes/widths
     nchunks = (m + _CHUNK - 1) // _CHUNK
-    nr = reg.shape[0]
     # numba's OpenMP layer splits a prange statically into one contiguous run per thread, and the work per
     # chunk varies a lot along the spatial order (tless_04: 81 % of it in the second half): thread t takes
     # chunks t, t + T, t + 2T, ... instead, which balances because neighbouring chunks cost about the same
     for t in prange(nthreads):
-        stack = np.empty(128, dtype=np.int64)
+        tmemo = memo[numba.get_thread_id()]
         caches = np.full((2, _CACHE), -1, dtype=np.int64)  # recent blockers: fingers, palm
         cache_pos = np.zeros(2, dtype=np.int64)
-        F = np.empty(12)
-        xr = np.empty((nr, 2))
-        for r in range(2, nr):
-            xr[r, 0] = -reg[r, _PX]
-            xr[r, 1] = reg[r, _PX]
-        tmemo = memo[numba.get_thread_id()]
         for c in range(t, nchunks, nthreads):
-            st = stats[c]
-            for q in range(c * _CHUNK, min((c + 1) * _CHUNK, m)):
-                if from_pairs:
-                    # numpy's arithmetic for 0.5 (p_i + p_j), d / |d| and |d|, bit for bit (the squares are added
-                    # in numpy's order), so both entry points give the same masks
-                    a, b = pi[q], pj[q]
-                    dx, dy, dz = P[b, 0] - P[a, 0], P[b, 1] - P[a, 1], P[b, 2] - P[a, 2]
-                    w = np.sqrt(dx * dx + dy * dy + dz * dz)
-                    ax, ay, az = dx / w, dy / w, dz / w
-                    F[0] = 0.5 * (P[a, 0] + P[b, 0])
-                    F[1] = 0.5 * (P[a, 1] + P[b, 1])
-                    F[2] = 0.5 * (P[a, 2] + P[b, 2])
-                else:
-                    w = widths[q]
-                    ax, ay, az = axes[q, 0], axes[q, 1], axes[q, 2]
-                    F[0], F[1], F[2] = mids[q, 0], mids[q, 1], mids[q, 2]
-                yx, yy, yz, zx, zy, zz = _basis(ax, ay, az, switch)
-                F[3], F[4], F[5] = ax, ay, az
-                F[6], F[7], F[8] = yx, yy, yz
-                F[9], F[10], F[11] = zx, zy, zz
-                _x_ranges(xr, inside[q], w, model_f)
-                hw = 0.5 * w
-                cell0 = _cell(grid, F[0] - hw * ax, F[1] - hw * ay, F[2] - hw * az)
-                cell1 = _cell(grid, F[0] + hw * ax, F[1] + hw * ay, F[2] + hw * az)
-                # the remembered blockers first (fingers, then palm), inlined: most candidates end there without a
-                # call; then the tree (fingers, then palm). The fingers are small regions and settle most
-                # candidates. The calls are spelled out: with their constant arguments the compiler specialises
-                # each (one call in a loop over both measured 15-25 % slower)
-                blocked, cache_pos[0] = _probe(
-                    F,
-                    X,
-                    Y,
-                    Z,
-                    reg,
-                    0,
-                    2,
-                    xr,
-                    cos_k,
-                    sin_k,
-                    half,
-                    gfac,
-                    full,
-                    True,
-                    caches[0],
-                    cache_pos[0],
-                    tmemo,
-                    grid,
-                    cell0,
-                    cell1,
-                    st,
-                )
-                if blocked != full and nr > 2:
-                    more, cache_pos[1] = _probe(
-                        F,
-                        X,
-                        Y,
-                        Z,
-                        reg,
-                        2,
-                        nr,
-                        xr,
-                        cos_k,
-                        sin_k,
-                        half,
-                        gfac,
-                        full & ~blocked,
-                        False,
-                        caches[1],
-                        cache_pos[1],
-                        tmemo,
-                        grid,
-                        -1,
-                        -1,
-                        st,
-                    )
-                    blocked |= more
-                if blocked != full:
-                    more, cache_pos[0] = _walk(
-                        F,
-                        X,
-                        Y,
-                        Z,
-                        nodes,
-                        leaves,
-                        reg,
-                        0,
-                        2,
-                        xr,
-                        cos_k,
-                        sin_k,
-                        half,
-                        gfac,
-                        full & ~blocked,
-                        True,
-                        stack,
-                        caches[0],
-                        cache_pos[0],
-                        tmemo,
-                        grid,
-                        cell0,
-                        cell1,
-                        st,
-                    )
-                    blocked |= more
-                if blocked != full and nr > 2:
-                    more, cache_pos[1] = _walk(
-                        F,
-                        X,
-                        Y,
-                        Z,
-                        nodes,
-                        leaves,
-                        reg,
-                        2,
-                        nr,
-                        xr,
-                        cos_k,
-                        sin_k,
-                        half,
-                        gfac,
-                        full & ~blocked,
-                        False,
-                        stack,
-                        caches[1],
-                        cache_pos[1],
-                        tmemo,
-                        grid,
-                        -1,
-                        -1,
-                        st,
-                    )
-                    blocked |= more
-                free = ~blocked & full
-                for k in range(out.shape[1]):
-                    out[q, k] = (free >> np.uint64(k)) & np.uint64(1) != np.uint64(0)
+            _chunk(
+                c * _CHUNK,
+                min((c + 1) * _CHUNK, m),
+                from_pairs,
+                mids,
+                axes,
+                widths,
+                inside,
+                P,
+                pi,
+                pj,
+                X,
+                Y,
+                Z,
+                nodes,
+                leaves,
+                reg,
+                model_f,
+                cos_k,
+                sin_k,
+                half,
+                gfac,
+                full,
+                switch,
+                tmemo,
+                caches,
+                cache_pos,
+                grid,
+                out,
+                stats[c],
+            )
 
 
 #: the last few prepared point sets: the pipeline calls free_rolls in batches on the same points (the memo of
