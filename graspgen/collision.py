@@ -801,11 +801,11 @@ def _chunk(
     st,
 ):
     """The free rolls of candidates lo..hi-1 into out (a unit of _free_rolls_kernel's parallel work), with the
-    thread's memo and recent blockers (caches, cache_pos). Its own function, called from the parallel loop: in the
-    loop's body numba compiled the kernel in 67-72 s, about half of the package's cold start, and 47-51 s so
-    (interleaved runs on an empty cache), at the same speed (in-process A/B on the ring's and tless_04's pairs:
-    median ratios 0.98-1.04, same masks). Its working arrays (stack, frame, x ranges) are its own: with them
-    passed in per candidate, the same code ran 22 % slower."""
+    thread's memo and recent blockers (caches, cache_pos). Its own function, called from the parallel loop: with
+    this code in the loop's body numba compiled the kernel in 67-72 s, about half of the package's cold start; as
+    a function, in 47-51 s (interleaved runs on an empty cache), at the same speed (in-process A/B on the ring's
+    and tless_04's pairs: median ratios 0.98-1.04, same masks). Its working arrays (stack, frame, x ranges) are
+    its own: with them passed in per candidate, the same code ran 22 % slower."""
     nr = reg.shape[0]
     stack = np.empty(128, dtype=np.int64)
     F = np.empty(12)
