@@ -331,9 +331,8 @@ def _lower(a0, a1, b, c0, c1, inv_c):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _limit(best, a0, a1, b, c0, c1, inv_c, steps):
-    """min(best, the largest load scale held in the direction with coefficients a0, a1, b)."""
-    lo = _lower(a0, a1, b, c0, c1, inv_c)
+def _limit(best, lo, a0, a1, b, c0, c1, steps):
+    """min(best, the largest load scale held in the direction with coefficients a0, a1, b; lo = their _lower)."""
     if lo >= best:
         return best
     hi = best
@@ -372,6 +371,7 @@ def _limit(best, a0, a1, b, c0, c1, inv_c, steps):
 @njit(parallel=True, cache=True, error_model="numpy")
 def _margins_kernel(P, Nrm, rho, I, J, com, W, mu, cap, dirs, steps, refinements, max_margin, floor, out):
     K = dirs.shape[0]
+    dirsT = np.ascontiguousarray(dirs.T)
     # refinement: around the worst direction, 8 neighbours at 1/2, 1/4, ... of the lattice spacing
     spacing = np.sqrt(np.pi / K)
     ring_c = np.cos(np.arange(8) * np.pi / 4.0)
@@ -381,18 +381,23 @@ def _margins_kernel(P, Nrm, rho, I, J, com, W, mu, cap, dirs, steps, refinements
     N = I.shape[0]
     chunks = (N + _CHUNK - 1) // _CHUNK
     for ch in prange(chunks):
-        co = np.empty((K, 3))
+        co = np.empty((4, max(K, 8)))
         for n in range(ch * _CHUNK, min(N, (ch + 1) * _CHUNK)):
-            out[n] = _margin_one(P, Nrm, I[n], J[n], rho, com, dirs, co, ring_c, ring_s, steps, refinements, run)
+            out[n] = _margin_one(P, Nrm, I[n], J[n], rho, com, dirsT, co, ring_c, ring_s, steps, refinements, run)
 
 
 @njit(cache=True, error_model="numpy")
 def _margin_one(P, Nrm, ia, ib, rho, com, dirs, co, ring_c, ring_s, steps, refinements, run):
     """The margin of the candidate (P[ia], P[ib]) with the points' normals Nrm (none: both on the closing axis) and
-    torsion radii rho; `run`: the load W, mu F, W / (mu F), max_margin, floor, the lattice spacing, atan(mu) and its
-    tangent (the same for every candidate)."""
+    torsion radii rho; `dirs` (3, K): the lattice's directions as columns; `co` (4, >= max(K, 8)): work rows of
+    a0, a1, b and the lower bound per direction; `run`: the load W, mu F, W / (mu F), max_margin, floor, the
+    lattice spacing, atan(mu) and its tangent (the same for every candidate).
+
+    The coefficients of all directions (the lattice's, then each refinement's 8) come first in a loop without
+    branches, which the compiler vectorises; the limit scales follow in order. Same margins, bit for bit, as one
+    loop doing both, at 0.85-0.9x the time (the thick ring's 400,025 candidates: 0.30 -> 0.26-0.27 s)."""
     W, cap, w_cap, max_margin, floor, spacing, phi, tan_phi = run
-    K = dirs.shape[0]
+    K = dirs.shape[1]
     ax = P[ib, 0] - P[ia, 0]
     ay = P[ib, 1] - P[ia, 1]
     az = P[ib, 2] - P[ia, 2]
@@ -421,27 +426,31 @@ def _margin_one(P, Nrm, ia, ib, rho, com, dirs, co, ring_c, ring_s, steps, refin
     w_cap0 = w_cap / k0
     w_cap1 = w_cap / k1
     inv_c = 1.0 / (c0 + c1)
-    # the direction with the lowest lower bound first: most other directions then end at their bound
-    first = 0
-    low = np.inf
+    # every direction's coefficients and lower bound in one branch-free loop (vectorised), then the direction
+    # with the lowest lower bound first: most other directions then end at their bound
     for k in range(K):
-        a0, a1, b = _coeffs(dirs[k, 0], dirs[k, 1], dirs[k, 2], rx, ry, rz, inv_h, w_cap0, w_cap1, W)
-        co[k, 0], co[k, 1], co[k, 2] = a0, a1, b
-        lb = _lower(a0, a1, b, c0, c1, inv_c)
-        if lb < low:
-            low = lb
+        a0, a1, b = _coeffs(dirs[0, k], dirs[1, k], dirs[2, k], rx, ry, rz, inv_h, w_cap0, w_cap1, W)
+        co[0, k], co[1, k], co[2, k] = a0, a1, b
+        co[3, k] = _lower(a0, a1, b, c0, c1, inv_c)
+    first = 0
+    low = co[3, 0]
+    for k in range(1, K):
+        if co[3, k] < low:
+            low = co[3, k]
             first = k
-    best = _limit(max_margin, co[first, 0], co[first, 1], co[first, 2], c0, c1, inv_c, steps)
+    best = _limit(max_margin, low, co[0, first], co[1, first], co[2, first], c0, c1, steps)
     worst = first
     if best >= floor:
         for k in range(K):
-            s = _limit(best, co[k, 0], co[k, 1], co[k, 2], c0, c1, inv_c, steps)
+            if co[3, k] >= best:
+                continue
+            s = _limit(best, co[3, k], co[0, k], co[1, k], co[2, k], c0, c1, steps)
             if s < best:
                 best = s
                 worst = k
                 if best < floor:
                     break
-    dx, dy, dz = dirs[worst, 0], dirs[worst, 1], dirs[worst, 2]
+    dx, dy, dz = dirs[0, worst], dirs[1, worst], dirs[2, worst]
     step = 0.5 * spacing
     for _ in range(refinements):
         if best < floor:
@@ -457,6 +466,7 @@ def _margin_one(P, Nrm, ia, ib, rho, com, dirs, co, ring_c, ring_s, steps, refin
         qy2 = dz * px - dx * pz
         qz2 = dx * py - dy * px
         bx, by, bz = dx, dy, dz
+        # the 8 neighbours' coefficients and bounds at once (vectorised), then each against the running best
         for j in range(8):
             ca = ring_c[j] * step
             sa = ring_s[j] * step
@@ -465,9 +475,20 @@ def _margin_one(P, Nrm, ia, ib, rho, com, dirs, co, ring_c, ring_s, steps, refin
             vz = bz + ca * pz + sa * qz2
             lv = np.sqrt(vx * vx + vy * vy + vz * vz)
             a0, a1, b = _coeffs(vx / lv, vy / lv, vz / lv, rx, ry, rz, inv_h, w_cap0, w_cap1, W)
-            s = _limit(best, a0, a1, b, c0, c1, inv_c, steps)
+            co[0, j], co[1, j], co[2, j] = a0, a1, b
+            co[3, j] = _lower(a0, a1, b, c0, c1, inv_c)
+        for j in range(8):
+            if co[3, j] >= best:
+                continue
+            s = _limit(best, co[3, j], co[0, j], co[1, j], co[2, j], c0, c1, steps)
             if s < best:
                 best = s
+                ca = ring_c[j] * step
+                sa = ring_s[j] * step
+                vx = bx + ca * px + sa * qx2
+                vy = by + ca * py + sa * qy2
+                vz = bz + ca * pz + sa * qz2
+                lv = np.sqrt(vx * vx + vy * vy + vz * vz)
                 dx, dy, dz = vx / lv, vy / lv, vz / lv
         step *= 0.5
     return min(best, max_margin)
