@@ -32,7 +32,11 @@ own slab along the closing axis (all its points lie there). A node wholly inside
 roll at once. Before any traversal, remembered blockers are tried: a memo per thread keyed by the grid cell of
 each contact (fingers) and of the palm's front at each open roll (palm), and a small per-thread cache;
 neighbouring candidates share most of their blockers, and most blocked candidates end there. The fingers' box is
-symmetric under a half turn, so rolls k and k + R/2 share their work (R even).
+symmetric under a half turn, so rolls k and k + R/2 share their work (R even). Before the palm's walk, the rolls
+at which the whole part lies in front of the palm's front face are taken out of it (_hull_free: the support
+function of the points' convex hull, from a cube map of bounds or, near the threshold, a hill climb over the
+hull's vertices): the walk could prove such a roll free only by visiting every node near the palm's region, and
+without it the walk stops as soon as the other rolls are blocked.
 
 Tried and not kept (work counters of free_rolls_stats, deterministic, and CPU time on the thick ring and tless_04
 at 10,000 points): the palm's ball test at the open rolls only instead of at every roll (within the noise); the
@@ -50,6 +54,13 @@ blocked roll at about 4x a point's cost: 6 % slower in all). A node-visit budget
 mesh-exact check (point and mesh tests together, same final masks on the ring): 40 nodes 8 % faster in one run,
 45 nodes 20 % faster in one run of 5 rounds and 4 % in the next of 8 (within the noise); not kept: the free rolls
 would then be the triangles' answer alone, not also the points'.
+Tenth session (in-process A/B, interleaved, same masks): the hull certificate above: the palm walk's time on the
+thick ring 0.94x (9 rounds; 0.90-0.97 over four runs on a noisy host), tless_04 0.79x, tless_13 0.95x,
+featuretype 0.95x, idler riser 0.97x; building the hull and its 24 x 24 x 6 table costs 11-16 ms per point set
+(qhull most of it; a table by matrix product instead of hill climbs took 50-70 ms). With exact hill climbs alone
+(no table) the ring ran 1.10x: its sample's hull has 1,242 vertices, and a roll's step of 22.5 degrees walks far
+along its rims. Taken out before the palm's remembered blockers instead of before its walk: within 1 % in an
+oracle run (certificates precomputed), at twice the lookups.
 """
 
 from __future__ import annotations
@@ -80,6 +91,7 @@ _NODE = 24  # floats per tree node: see _build_tree
 _STATS = 8  # counters per chunk: see free_rolls_stats
 _MEMO_SLOTS = 2  # blockers remembered per memo cell
 _MEMO_CELLS = 1 << 20  # at most this many memo cells
+_HULL_CELLS = 24  # cube-map cells per face edge of the hull's support bounds (_hull)
 _MEMO_H = 4.0  # memo cell width over the mean leaf patch (half extents along its two longer axes, summed)
 # the tree, given normals: a node splits along (position, weight x rms radius x normal) when its children's ball
 # radius + thickness x thinnest half extent is lower than by position alone. Work counts (deterministic) of a
@@ -768,6 +780,71 @@ def _cell(grid, x, y, z):
     return (i * ny + j) * nz + k
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _cube_cell(ux, uy, uz, n):
+    """The cell of unit direction u in a cube map of n x n cells per face (see _hull)."""
+    bx, by, bz = abs(ux), abs(uy), abs(uz)
+    if bx >= by and bx >= bz:
+        f, m, p, q = 0 if ux > 0 else 1, bx, uy, uz
+    elif by >= bz:
+        f, m, p, q = 2 if uy > 0 else 3, by, uz, ux
+    else:
+        f, m, p, q = 4 if uz > 0 else 5, bz, ux, uy
+    i = min(max(int((p / m + 1.0) * 0.5 * n), 0), n - 1)
+    j = min(max(int((q / m + 1.0) * 0.5 * n), 0), n - 1)
+    return (f * n + i) * n + j
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _hull_free(F, hull, target, cos_k, sin_k, thr):
+    """Rolls within `target` at which every sample point lies in front of the palm: the support of the points'
+    convex hull along -Z_k (the approach's reverse), from the midpoint, is below thr (-z_hi less a guard band), so
+    no point has z <= z_hi there and the palm cannot block the roll. hull (see _hull): the hull's vertices V, its
+    vertex graph (CSR), a cube map of directions with, per cell, an upper bound of max (V - o) . u over the cell's
+    directions and the vertex that attains the maximum at its centre, and (o, n). The bound settles most rolls;
+    between it and the value at that vertex, a hill climb over the vertex graph from there gives the exact
+    support (a vertex that no neighbour beats maximises a linear function over a convex polytope)."""
+    V, a_start, adj, bound, arg, info = hull
+    free = np.uint64(0)
+    if V.shape[0] == 0:
+        return free
+    ox, oy, oz, n = info[0], info[1], info[2], int(info[3])
+    dx, dy, dz = ox - F[0], oy - F[1], oz - F[2]
+    for k in range(cos_k.shape[0]):
+        bit = np.uint64(1) << np.uint64(k)
+        if not (target & bit):
+            continue
+        s, c = sin_k[k], cos_k[k]
+        ux = s * F[6] - c * F[9]
+        uy = s * F[7] - c * F[10]
+        uz = s * F[8] - c * F[11]
+        om = dx * ux + dy * uy + dz * uz  # (o - m) . u
+        cell = _cube_cell(ux, uy, uz, n)
+        if bound[cell] + om < thr:
+            free |= bit
+            continue
+        v = arg[cell]
+        best = (V[v, 0] - ox) * ux + (V[v, 1] - oy) * uy + (V[v, 2] - oz) * uz
+        if best + om >= thr:
+            continue
+        while True:
+            nxt = v
+            for e in range(a_start[v], a_start[v + 1]):
+                w = adj[e]
+                val = (V[w, 0] - ox) * ux + (V[w, 1] - oy) * uy + (V[w, 2] - oz) * uz
+                if val > best:
+                    best = val
+                    nxt = w
+            if nxt == v:
+                break
+            v = nxt
+            if best + om >= thr:
+                break
+        if best + om < thr:
+            free |= bit
+    return free
+
+
 @njit(cache=True, error_model="numpy")
 def _chunk(
     lo,
@@ -797,6 +874,8 @@ def _chunk(
     caches,
     cache_pos,
     grid,
+    hull,
+    hull_thr,
     out,
     st,
 ):
@@ -916,6 +995,12 @@ def _chunk(
                 st,
             )
             blocked |= more
+        certain = np.uint64(0)
+        if blocked != full and nr > 2:
+            # rolls at which the whole part lies in front of the palm need no walk: the walk could only prove
+            # them free by visiting every node near the palm's region, and it stops once the rest is blocked
+            certain = _hull_free(F, hull, full & ~blocked, cos_k, sin_k, hull_thr)
+            blocked |= certain
         if blocked != full and nr > 2:
             more, cache_pos[1] = _walk(
                 F,
@@ -944,6 +1029,8 @@ def _chunk(
                 st,
             )
             blocked |= more
+        if nr > 2:
+            blocked &= ~certain
         free = ~blocked & full
         for k in range(out.shape[1]):
             out[q, k] = (free >> np.uint64(k)) & np.uint64(1) != np.uint64(0)
@@ -973,6 +1060,8 @@ def _free_rolls_kernel(
     switch,
     memo,
     grid,
+    hull,
+    hull_thr,
     nthreads,
     out,
     stats,
@@ -1016,6 +1105,8 @@ def _free_rolls_kernel(
                 caches,
                 cache_pos,
                 grid,
+                hull,
+                hull_thr,
                 out,
                 stats[c],
             )
@@ -1097,7 +1188,100 @@ def _prepare(points, normals, model, rolls):
     grid = np.array([lo[0], lo[1], lo[2], 1.0 / h, dims[0], dims[1], dims[2]], dtype=np.float64)
     # one memo per thread: shared cells that both threads keep rewriting cost more than the hits they share
     memo = np.full((numba.config.NUMBA_NUM_THREADS, 2, int(np.prod(dims)), _MEMO_SLOTS), -1, dtype=np.int64)
-    return soa, nodes, leaves, _regions(model), model_f, cos_k, sin_k, half, gfac, full, memo, grid
+    reg = _regions(model)
+    hull_thr = -reg[2, _ZHI] - 4.0 * pad if len(reg) > 2 else 0.0
+    return soa, nodes, leaves, reg, model_f, cos_k, sin_k, half, gfac, full, memo, grid, _hull(P), hull_thr
+
+
+def _hull(P: np.ndarray, cells: int = _HULL_CELLS) -> tuple:
+    """The points' convex hull for _hull_free: (vertices (k, 3), CSR start (k + 1,), neighbours, per cube-map cell
+    an upper bound of max (V - o) . u over the cell's directions u and the vertex that attains the maximum at the
+    cell's centre, [o, cells]); o is the vertices' mean. The bound: the maximum at the centre direction c plus R |u -
+    c|, R = max |V - o|, with |u - c| at most the chord to the cell's farthest corner (a cell is a convex spherical
+    quadrilateral). Empty arrays when the points span no volume (flat, or fewer than 4 points)."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    empty = (
+        np.zeros((0, 3)),
+        np.zeros(1, dtype=np.int64),
+        np.zeros(0, dtype=np.int64),
+        np.zeros(0),
+        np.zeros(0, dtype=np.int64),
+        np.zeros(4),
+    )
+    if len(P) < 4:
+        return empty
+    try:
+        h = ConvexHull(P)
+    except (QhullError, ValueError):
+        return empty
+    ids = np.asarray(h.vertices, dtype=np.int64)
+    local = np.full(len(P), -1, dtype=np.int64)
+    local[ids] = np.arange(len(ids))
+    tri = local[np.asarray(h.simplices, dtype=np.int64)]
+    src = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2], tri[:, 1], tri[:, 2], tri[:, 0]])
+    dst = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0], tri[:, 0], tri[:, 1], tri[:, 2]])
+    by_src = np.argsort(src, kind="stable")  # each edge twice per direction (two facets share it): harmless
+    adj = np.ascontiguousarray(dst[by_src])
+    start = np.zeros(len(ids) + 1, dtype=np.int64)
+    np.cumsum(np.bincount(src, minlength=len(ids)), out=start[1:])
+    V = np.ascontiguousarray(P[ids])
+    o = V.mean(axis=0)
+    R = float(np.max(np.linalg.norm(V - o, axis=1)))
+    # cube map: face f = 2 a + (u_a < 0), (p, q) = (u_{a+1}, u_{a+2}) / |u_a| in cells of 2 / n (as _cube_cell)
+    n = cells
+    edge = -1.0 + 2.0 * np.arange(n + 1) / n
+    mid = 0.5 * (edge[:-1] + edge[1:])
+    centres, chords = [], []
+    for f in range(6):
+        c = _face_units(f, *np.meshgrid(mid, mid, indexing="ij"))
+        chord = np.zeros((n, n))
+        for di in (0, 1):
+            for dj in (0, 1):
+                corner = _face_units(f, *np.meshgrid(edge[di : n + di], edge[dj : n + dj], indexing="ij"))
+                chord = np.maximum(chord, np.linalg.norm(corner - c, axis=-1))
+        centres.append(c.reshape(-1, 3))
+        chords.append(chord.reshape(-1))
+    U = np.ascontiguousarray(np.concatenate(centres))
+    val = np.empty(len(U))
+    arg = np.empty(len(U), dtype=np.int64)
+    _support_table(np.ascontiguousarray(V - o), start, adj, U, val, arg)
+    bound = val + R * (np.concatenate(chords) * (1.0 + 1e-9) + 1e-9)
+    info = np.array([o[0], o[1], o[2], float(n)])
+    return V, start, adj, np.ascontiguousarray(bound), arg, info
+
+
+def _face_units(f: int, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Unit directions on cube face f (axis f // 2, + for even f) at face coordinates (p, q), as _cube_cell."""
+    a = f // 2
+    u = np.empty(p.shape + (3,))
+    u[..., a] = 1.0 if f % 2 == 0 else -1.0
+    u[..., (a + 1) % 3] = p
+    u[..., (a + 2) % 3] = q
+    return u / np.linalg.norm(u, axis=-1, keepdims=True)
+
+
+@njit(cache=True)
+def _support_table(W, start, adj, U, val, arg):
+    """max_v W[v] . U[c] and its vertex for each direction U[c], by hill climbs over the hull's vertex graph, each
+    started where the previous one ended (neighbouring cells have neighbouring maxima)."""
+    v = 0
+    for c in range(U.shape[0]):
+        ux, uy, uz = U[c, 0], U[c, 1], U[c, 2]
+        best = W[v, 0] * ux + W[v, 1] * uy + W[v, 2] * uz
+        while True:
+            nxt = v
+            for e in range(start[v], start[v + 1]):
+                w = adj[e]
+                x = W[w, 0] * ux + W[w, 1] * uy + W[w, 2] * uz
+                if x > best:
+                    best = x
+                    nxt = w
+            if nxt == v:
+                break
+            v = nxt
+        val[c] = best
+        arg[c] = v
 
 
 def _run(points, normals, midpoints, axes, widths, inside, model, rolls, pairs=None):
@@ -1111,7 +1295,7 @@ def _run(points, normals, midpoints, axes, widths, inside, model, rolls, pairs=N
     stats = np.zeros(((m + _CHUNK - 1) // _CHUNK, _STATS), dtype=np.int64)
     if m == 0 or len(points) == 0:
         return np.ones((m, rolls), dtype=bool), stats
-    soa, nodes, leaves, reg, model_f, cos_k, sin_k, half, gfac, full, memo, grid = _prepared(
+    soa, nodes, leaves, reg, model_f, cos_k, sin_k, half, gfac, full, memo, grid, hull, hull_thr = _prepared(
         points, normals, model, rolls
     )
     out = np.empty((m, rolls), dtype=np.bool_)
@@ -1146,6 +1330,8 @@ def _run(points, normals, midpoints, axes, widths, inside, model, rolls, pairs=N
             ROLL_REFERENCE_SWITCH,
             memo,
             grid,
+            hull,
+            hull_thr,
             numba.get_num_threads(),
             out,
             stats,

@@ -32,8 +32,10 @@ def pair_criteria(points, normals, *, stroke, min_width, friction, safety_factor
     return I, J, outside, inner
 
 
-def gripper_boxes(gripper: GripperSpec, width: float, mode: str, inside: bool = False):
-    """Forbidden boxes in the grasp frame as (lo (3,), hi (3,)) pairs, per the module docstring of collision.py."""
+def gripper_boxes(gripper: GripperSpec, width: float, mode: str, inside: bool = False, reach: float = 0.0):
+    """Forbidden boxes in the grasp frame as (lo (3,), hi (3,)) pairs, per the module docstring of collision.py;
+    `reach` > 0 (swept): the palm's footprint, at least a finger wide, swept from the fingers' base to `reach`
+    behind it (the approach)."""
     t, m = gripper.finger_thickness, TOLERANCES.inner_margin
     hy, hz = gripper.finger_width / 2, gripper.finger_depth / 2
     if not inside:
@@ -43,19 +45,21 @@ def gripper_boxes(gripper: GripperSpec, width: float, mode: str, inside: bool = 
         o = max(width - gripper.pregrasp_clearance, gripper.min_width + 2 * t) if mode == "swept" else width
         a, b = min(o, width) / 2 - t, width / 2 - m
     boxes = [(np.array([-b, -hy, -hz]), np.array([-a, hy, hz])), (np.array([a, -hy, -hz]), np.array([b, hy, hz]))]
-    if mode == "swept" and gripper.palm_depth > 0:
+    if mode == "swept" and (gripper.palm_depth > 0 or reach > 0):
         px = gripper.stroke / 2 + t
-        py = gripper.palm_width / 2
-        boxes.append((np.array([-px, -py, -hz - gripper.palm_depth]), np.array([px, py, -hz])))
+        py = gripper.palm_width / 2 if gripper.palm_depth > 0 else 0.0
+        if reach > 0:
+            py = max(py, hy)
+        boxes.append((np.array([-px, -py, -hz - max(gripper.palm_depth, reach)]), np.array([px, py, -hz])))
     return boxes
 
 
-def free_rolls(points, midpoints, axes, widths, inside, gripper, mode, rolls):
+def free_rolls(points, midpoints, axes, widths, inside, gripper, mode, rolls, reach=0.0):
     """(m, rolls) bool by brute force: every point against every box at every roll."""
     psi = roll_angles_rad(rolls)
     out = np.zeros((len(midpoints), rolls), dtype=bool)
     for c in range(len(midpoints)):
-        boxes = gripper_boxes(gripper, widths[c], mode, bool(inside[c]))
+        boxes = gripper_boxes(gripper, widths[c], mode, bool(inside[c]), reach)
         T = grasp_frames(np.repeat(midpoints[c : c + 1], rolls, 0), np.repeat(axes[c : c + 1], rolls, 0), psi)
         for k in range(rolls):
             R, t = T[k, :3, :3], T[k, :3, 3]

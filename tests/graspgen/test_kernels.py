@@ -170,6 +170,79 @@ def test_free_rolls_equal_reference(name, mode):
     assert expect.any() and not expect.all()
 
 
+@pytest.mark.parametrize("name", ["ring", "u", "cylinder"])
+def test_free_rolls_with_the_approach_equal_reference(name):
+    """With the approach (the palm's footprint swept a part's length behind the fingers, as the pipeline runs
+    criterion (d)), where the hull's support settles most free rolls before the palm's walk: the same masks as
+    every point against every box at every roll."""
+    from graspgen.collision import approach_reach
+
+    pts, nrm = _sample(_parts()[name], 1200)
+    reach = approach_reach(pts)
+    mids, axes, w, inside = _candidates(pts, nrm, inside=(name == "ring"))
+    fr = free_rolls(pts, nrm, mids, axes, w, inside, collision_model(GRIPPER, "swept", reach=reach), 16)
+    n_free = fr.sum(1)
+    rng = np.random.default_rng(2)
+    sel = np.unique(
+        np.concatenate(
+            [
+                rng.choice(len(mids), min(200, len(mids)), replace=False),
+                np.nonzero(n_free >= 3)[0][:60],
+                np.nonzero((n_free > 0) & (n_free < 3))[0][:60],
+            ]
+        )
+    )
+    expect = ref.free_rolls(pts, mids[sel], axes[sel], w[sel], inside[sel], GRIPPER, "swept", 16, reach=reach)
+    assert np.array_equal(fr[sel], expect)
+    assert expect.any() and not expect.all()
+
+
+def test_hull_support_bounds_the_points_and_settles_rolls_exactly():
+    """The palm's certificate (_hull, _hull_free): the cube map's bound is above every sample point's reach along
+    random directions, and for random frames the rolls it calls free are exactly those at which no point lies
+    behind the threshold (brute force over all points), with both outcomes present."""
+    from graspgen.collision import _cube_cell, _hull, _hull_free
+
+    pts, _ = _sample(_parts()["u"], 3000, seed=4)
+    hull = _hull(pts)
+    V, _, _, bound, _, info = hull
+    o, n = info[:3], int(info[3])
+    rng = np.random.default_rng(7)
+    U = rng.normal(size=(5000, 3))
+    U /= np.linalg.norm(U, axis=1)[:, None]
+    reach = ((pts - o) @ U.T).max(axis=0)
+    cells = np.array([_cube_cell(u[0], u[1], u[2], n) for u in U])
+    assert np.all(reach <= bound[cells])
+    assert np.all(bound[cells] - reach < 0.01)  # a useful bound: within 1 cm on a 4 cm part
+    psi = roll_angles_rad(16)
+    cos_k, sin_k = np.cos(psi), np.sin(psi)
+    full = np.uint64((1 << 16) - 1)
+    seen = set()
+    for _ in range(300):
+        x = rng.normal(size=3)
+        x /= np.linalg.norm(x)
+        y = np.cross(x, rng.normal(size=3))
+        y /= np.linalg.norm(y)
+        z = np.cross(x, y)
+        m = pts.min(0) + rng.random(3) * np.ptp(pts, axis=0)
+        F = np.concatenate([m, x, y, z])
+        thr = rng.uniform(0.0, 0.03)
+        got = int(_hull_free(F, hull, full, cos_k, sin_k, thr))
+        for k in range(16):
+            u = sin_k[k] * y - cos_k[k] * z  # -Z at roll k
+            free = ((pts - m) @ u).max() < thr
+            assert bool(got >> k & 1) == free
+            seen.add(free)
+    assert seen == {True, False}
+
+
+@pytest.mark.parametrize("points", [np.random.default_rng(0).random((50, 3)) * [1, 1, 0], np.eye(3)])
+def test_hull_of_flat_or_tiny_samples_certifies_nothing(points):
+    from graspgen.collision import _hull
+
+    assert len(_hull(points)[0]) == 0
+
+
 @pytest.mark.parametrize("rolls", [1, 5, 64])
 def test_free_rolls_any_roll_count(rolls):
     pts, nrm = _sample(_parts()["ring"], 600)
