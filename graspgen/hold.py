@@ -368,6 +368,17 @@ def _limit(best, lo, a0, a1, b, c0, c1, steps):
     return lo
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _neighbour(bx, by, bz, tangents, ca, sa):
+    """The unit direction b + ca p + sa q, normalised (tangents = p, q at b): a refinement's neighbour."""
+    px, py, pz, qx, qy, qz = tangents
+    vx = bx + ca * px + sa * qx
+    vy = by + ca * py + sa * qy
+    vz = bz + ca * pz + sa * qz
+    lv = np.sqrt(vx * vx + vy * vy + vz * vz)
+    return vx / lv, vy / lv, vz / lv
+
+
 @njit(parallel=True, cache=True, error_model="numpy")
 def _margins_kernel(P, Nrm, rho, I, J, com, W, mu, cap, dirs, steps, refinements, max_margin, floor, out):
     K = dirs.shape[0]
@@ -467,14 +478,10 @@ def _margin_one(P, Nrm, ia, ib, rho, com, dirs, co, ring_c, ring_s, steps, refin
         qz2 = dx * py - dy * px
         bx, by, bz = dx, dy, dz
         # the 8 neighbours' coefficients and bounds at once (vectorised), then each against the running best
+        tangents = (px, py, pz, qx2, qy2, qz2)
         for j in range(8):
-            ca = ring_c[j] * step
-            sa = ring_s[j] * step
-            vx = bx + ca * px + sa * qx2
-            vy = by + ca * py + sa * qy2
-            vz = bz + ca * pz + sa * qz2
-            lv = np.sqrt(vx * vx + vy * vy + vz * vz)
-            a0, a1, b = _coeffs(vx / lv, vy / lv, vz / lv, rx, ry, rz, inv_h, w_cap0, w_cap1, W)
+            vx, vy, vz = _neighbour(bx, by, bz, tangents, ring_c[j] * step, ring_s[j] * step)
+            a0, a1, b = _coeffs(vx, vy, vz, rx, ry, rz, inv_h, w_cap0, w_cap1, W)
             co[0, j], co[1, j], co[2, j] = a0, a1, b
             co[3, j] = _lower(a0, a1, b, c0, c1, inv_c)
         for j in range(8):
@@ -483,12 +490,6 @@ def _margin_one(P, Nrm, ia, ib, rho, com, dirs, co, ring_c, ring_s, steps, refin
             s = _limit(best, co[3, j], co[0, j], co[1, j], co[2, j], c0, c1, steps)
             if s < best:
                 best = s
-                ca = ring_c[j] * step
-                sa = ring_s[j] * step
-                vx = bx + ca * px + sa * qx2
-                vy = by + ca * py + sa * qy2
-                vz = bz + ca * pz + sa * qz2
-                lv = np.sqrt(vx * vx + vy * vy + vz * vz)
-                dx, dy, dz = vx / lv, vy / lv, vz / lv
+                dx, dy, dz = _neighbour(bx, by, bz, tangents, ring_c[j] * step, ring_s[j] * step)
         step *= 0.5
     return min(best, max_margin)
