@@ -54,7 +54,7 @@ blocked roll at about 4x a point's cost: 6 % slower in all). A node-visit budget
 mesh-exact check (point and mesh tests together, same final masks on the ring): 40 nodes 8 % faster in one run,
 45 nodes 20 % faster in one run of 5 rounds and 4 % in the next of 8 (within the noise); not kept: the free rolls
 would then be the triangles' answer alone, not also the points'.
-Tenth session (in-process A/B, interleaved, same masks): the hull certificate above: the palm walk's time on the
+Tenth session (in-process A/B, interleaved, same masks): the hull certificate above: the point test's time on the
 thick ring 0.94x (9 rounds; 0.90-0.97 over four runs on a noisy host), tless_04 0.79x, tless_13 0.95x,
 featuretype 0.95x, idler riser 0.97x; building the hull and its 24 x 24 x 6 table costs 11-16 ms per point set
 (qhull most of it; a table by matrix product instead of hill climbs took 50-70 ms). With exact hill climbs alone
