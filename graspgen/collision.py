@@ -799,17 +799,16 @@ def _cube_cell(ux, uy, uz, n):
 def _hull_free(F, hull, target, cos_k, sin_k, thr):
     """Rolls within `target` at which every sample point lies in front of the palm: the support of the points'
     convex hull along -Z_k (the approach's reverse), from the midpoint, is below thr (-z_hi less a guard band), so
-    no point has z <= z_hi there and the palm cannot block the roll. hull (see _hull): the hull's vertices V, its
-    vertex graph (CSR), a cube map of directions with, per cell, an upper bound of max (V - o) . u over the cell's
-    directions and the vertex that attains the maximum at its centre, and (o, n). The bound settles most rolls;
-    between it and the value at that vertex, a hill climb over the vertex graph from there gives the exact
-    support (a vertex that no neighbour beats maximises a linear function over a convex polytope)."""
-    V, a_start, adj, bound, arg, info = hull
+    no point has z <= z_hi there and the palm cannot block the roll. hull (see _hull): the hull's vertices W
+    relative to o, its vertex graph (CSR), a cube map of directions with, per cell, an upper bound of max W . u
+    over the cell's directions and the vertex that attains the maximum at its centre, and (o, n). The bound
+    settles most rolls; near the threshold, a hill climb from that vertex (_climb) gives the exact support."""
+    W, a_start, adj, bound, arg, info = hull
     free = np.uint64(0)
-    if V.shape[0] == 0:
+    if W.shape[0] == 0:
         return free
-    ox, oy, oz, n = info[0], info[1], info[2], int(info[3])
-    dx, dy, dz = ox - F[0], oy - F[1], oz - F[2]
+    n = int(info[3])
+    dx, dy, dz = info[0] - F[0], info[1] - F[1], info[2] - F[2]
     for k in range(cos_k.shape[0]):
         bit = np.uint64(1) << np.uint64(k)
         if not (target & bit):
@@ -824,25 +823,30 @@ def _hull_free(F, hull, target, cos_k, sin_k, thr):
             free |= bit
             continue
         v = arg[cell]
-        best = (V[v, 0] - ox) * ux + (V[v, 1] - oy) * uy + (V[v, 2] - oz) * uz
-        if best + om >= thr:
-            continue
-        while True:
-            nxt = v
-            for e in range(a_start[v], a_start[v + 1]):
-                w = adj[e]
-                val = (V[w, 0] - ox) * ux + (V[w, 1] - oy) * uy + (V[w, 2] - oz) * uz
-                if val > best:
-                    best = val
-                    nxt = w
-            if nxt == v:
-                break
-            v = nxt
-            if best + om >= thr:
-                break
+        _, best = _climb(W, a_start, adj, v, ux, uy, uz, om, thr)
         if best + om < thr:
             free |= bit
     return free
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _climb(W, start, adj, v, ux, uy, uz, shift, stop):
+    """(vertex, value) of max_w W[w] . u, by a hill climb over the hull's vertex graph (CSR start, adj) from
+    vertex v, each step to the neighbour of largest value; it stops early once value + shift reaches `stop` (inf:
+    never). A vertex that no neighbour beats maximises a linear function over a convex polytope."""
+    best = W[v, 0] * ux + W[v, 1] * uy + W[v, 2] * uz
+    while best + shift < stop:
+        nxt = v
+        for e in range(start[v], start[v + 1]):
+            w = adj[e]
+            x = W[w, 0] * ux + W[w, 1] * uy + W[w, 2] * uz
+            if x > best:
+                best = x
+                nxt = w
+        if nxt == v:
+            break
+        v = nxt
+    return v, best
 
 
 @njit(cache=True, error_model="numpy")
@@ -1029,8 +1033,7 @@ def _chunk(
                 st,
             )
             blocked |= more
-        if nr > 2:
-            blocked &= ~certain
+        blocked &= ~certain
         free = ~blocked & full
         for k in range(out.shape[1]):
             out[q, k] = (free >> np.uint64(k)) & np.uint64(1) != np.uint64(0)
@@ -1194,11 +1197,11 @@ def _prepare(points, normals, model, rolls):
 
 
 def _hull(P: np.ndarray, cells: int = _HULL_CELLS) -> tuple:
-    """The points' convex hull for _hull_free: (vertices (k, 3), CSR start (k + 1,), neighbours, per cube-map cell
-    an upper bound of max (V - o) . u over the cell's directions u and the vertex that attains the maximum at the
-    cell's centre, [o, cells]); o is the vertices' mean. The bound: the maximum at the centre direction c plus R |u -
-    c|, R = max |V - o|, with |u - c| at most the chord to the cell's farthest corner (a cell is a convex spherical
-    quadrilateral). Empty arrays when the points span no volume (flat, or fewer than 4 points)."""
+    """The points' convex hull for _hull_free: (vertices W (k, 3) relative to o, CSR start (k + 1,), neighbours, per
+    cube-map cell an upper bound of max W . u over the cell's directions u and the vertex that attains the maximum
+    at the cell's centre, [o, cells]); o is the vertices' mean. The bound: the maximum at the centre direction c
+    plus R |u - c|, R = max |W|, with |u - c| at most the chord to the cell's farthest corner (a cell is a convex
+    spherical quadrilateral). Empty arrays when the points span no volume (flat, or fewer than 4 points)."""
     from scipy.spatial import ConvexHull, QhullError
 
     empty = (
@@ -1225,9 +1228,9 @@ def _hull(P: np.ndarray, cells: int = _HULL_CELLS) -> tuple:
     adj = np.ascontiguousarray(dst[by_src])
     start = np.zeros(len(ids) + 1, dtype=np.int64)
     np.cumsum(np.bincount(src, minlength=len(ids)), out=start[1:])
-    V = np.ascontiguousarray(P[ids])
-    o = V.mean(axis=0)
-    R = float(np.max(np.linalg.norm(V - o, axis=1)))
+    o = P[ids].mean(axis=0)
+    W = np.ascontiguousarray(P[ids] - o)
+    R = float(np.max(np.linalg.norm(W, axis=1)))
     # cube map: face f = 2 a + (u_a < 0), (p, q) = (u_{a+1}, u_{a+2}) / |u_a| in cells of 2 / n (as _cube_cell)
     n = cells
     edge = -1.0 + 2.0 * np.arange(n + 1) / n
@@ -1245,10 +1248,10 @@ def _hull(P: np.ndarray, cells: int = _HULL_CELLS) -> tuple:
     U = np.ascontiguousarray(np.concatenate(centres))
     val = np.empty(len(U))
     arg = np.empty(len(U), dtype=np.int64)
-    _support_table(np.ascontiguousarray(V - o), start, adj, U, val, arg)
+    _support_table(W, start, adj, U, val, arg)
     bound = val + R * (np.concatenate(chords) * (1.0 + 1e-9) + 1e-9)
     info = np.array([o[0], o[1], o[2], float(n)])
-    return V, start, adj, np.ascontiguousarray(bound), arg, info
+    return W, start, adj, np.ascontiguousarray(bound), arg, info
 
 
 def _face_units(f: int, p: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -1263,24 +1266,11 @@ def _face_units(f: int, p: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def _support_table(W, start, adj, U, val, arg):
-    """max_v W[v] . U[c] and its vertex for each direction U[c], by hill climbs over the hull's vertex graph, each
-    started where the previous one ended (neighbouring cells have neighbouring maxima)."""
+    """max_w W[w] . U[c] and its vertex for each direction U[c] (_climb), each climb started where the previous
+    one ended (neighbouring cells have neighbouring maxima)."""
     v = 0
     for c in range(U.shape[0]):
-        ux, uy, uz = U[c, 0], U[c, 1], U[c, 2]
-        best = W[v, 0] * ux + W[v, 1] * uy + W[v, 2] * uz
-        while True:
-            nxt = v
-            for e in range(start[v], start[v + 1]):
-                w = adj[e]
-                x = W[w, 0] * ux + W[w, 1] * uy + W[w, 2] * uz
-                if x > best:
-                    best = x
-                    nxt = w
-            if nxt == v:
-                break
-            v = nxt
-        val[c] = best
+        v, val[c] = _climb(W, start, adj, v, U[c, 0], U[c, 1], U[c, 2], 0.0, np.inf)
         arg[c] = v
 
 
