@@ -453,8 +453,6 @@ def _margin_one(P, Nrm, ia, ib, rho, com, dirs, co, ring_c, ring_s, steps, refin
     worst = first
     if best >= floor:
         for k in range(K):
-            if co[3, k] >= best:
-                continue
             s = _limit(best, co[3, k], co[0, k], co[1, k], co[2, k], c0, c1, steps)
             if s < best:
                 best = s
@@ -485,8 +483,6 @@ def _margin_one(P, Nrm, ia, ib, rho, com, dirs, co, ring_c, ring_s, steps, refin
             co[0, j], co[1, j], co[2, j] = a0, a1, b
             co[3, j] = _lower(a0, a1, b, c0, c1, inv_c)
         for j in range(8):
-            if co[3, j] >= best:
-                continue
             s = _limit(best, co[3, j], co[0, j], co[1, j], co[2, j], c0, c1, steps)
             if s < best:
                 best = s
