@@ -63,9 +63,9 @@ import numpy as np
 from numba import njit, prange
 
 from . import libm
-from .collision import CollisionModel, _basis, _regions, _x_range_constants, _x_ranges
+from .collision import CollisionModel, _basis, _check_pairs, _regions, _x_range_constants, _x_ranges
 
-__all__ = ["MeshTree", "build_tree", "normal_spread_rad", "mesh_free_rolls"]
+__all__ = ["MeshTree", "build_tree", "normal_spread_rad", "mesh_free_rolls", "mesh_free_rolls_of_pairs"]
 
 _LEAF = 4
 _NODE = 23  # floats per tree node: see _build
@@ -366,11 +366,42 @@ def mesh_free_rolls(
 ) -> np.ndarray:
     """The rolls of `free` (n, R) bool that stay free when the gripper's boxes (the model's fingers and palm, as
     criterion (d) builds them) are tested against every triangle of `tree`. Returns a new (n, R) bool array."""
+    geometry = tuple(np.ascontiguousarray(a, dtype=np.float64) for a in (midpoints, axes, widths))
+    no_index = np.zeros(0, dtype=np.int64)
+    return _run(tree, geometry, (np.zeros((0, 3)), no_index, no_index), inside, free, model, switch)
+
+
+def mesh_free_rolls_of_pairs(
+    tree: MeshTree,
+    points: np.ndarray,
+    i: np.ndarray,
+    j: np.ndarray,
+    inside: np.ndarray,
+    free: np.ndarray,
+    model: CollisionModel,
+    *,
+    switch: float | None = None,
+) -> np.ndarray:
+    """mesh_free_rolls of the candidates (points[i], points[j]), contact 0 = points[i]: the same masks as
+    mesh_free_rolls with midpoints 0.5 (p_i + p_j), axes d / |d| and widths |d| (d = p_j - p_i) made by numpy. The
+    kernel derives them per candidate (collision.free_rolls_of_pairs does the same), so no (n, 3) arrays are
+    made."""
+    P = np.ascontiguousarray(points, dtype=np.float64)
+    i, j = (np.ascontiguousarray(a, dtype=np.int64) for a in (i, j))
+    if len(i):
+        _check_pairs(len(P), i, j)
+    geometry = (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
+    return _run(tree, geometry, (P, i, j), inside, free, model, switch)
+
+
+def _run(tree, geometry, index, inside, free, model, switch) -> np.ndarray:
     from .transforms import ROLL_REFERENCE_SWITCH
 
     switch = ROLL_REFERENCE_SWITCH if switch is None else switch
     free = np.ascontiguousarray(free, dtype=bool)
     n, R = free.shape
+    if len(inside) != n or (len(index[1]) not in (0, n)) or (len(index[1]) == 0 and len(geometry[0]) != n):
+        raise ValueError("the candidates' geometry, inside and free must have one row per candidate")
     out = free.copy()
     if n == 0 or len(tree) == 0:
         return out
@@ -381,9 +412,8 @@ def mesh_free_rolls(
     guard = 1e-9 * 2.0 * float(np.max(tree.nodes[0, 4:7])) + 1e-15
     with numba.parallel_chunksize(1):
         _mesh_kernel(
-            np.ascontiguousarray(midpoints, dtype=np.float64),
-            np.ascontiguousarray(axes, dtype=np.float64),
-            np.ascontiguousarray(widths, dtype=np.float64),
+            *geometry,
+            *index,
             np.ascontiguousarray(inside, dtype=np.bool_),
             out,
             tree.triangles,
@@ -624,9 +654,29 @@ def _region_boxes(xr, reg, rx, boxes_c, boxes_e):
         boxes_e[r, 2] = 0.5 * (reg[r, 2] - reg[r, 1])
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _pair_frame(P, a, b):
+    """Midpoint, unit axis and width of the candidate (P[a], P[b]) with numpy's arithmetic for 0.5 (p_a + p_b),
+    d / |d| and |d| (d = p_b - p_a), bit for bit, as collision._chunk makes them."""
+    dx, dy, dz = P[b, 0] - P[a, 0], P[b, 1] - P[a, 1], P[b, 2] - P[a, 2]
+    w = np.sqrt(dx * dx + dy * dy + dz * dz)
+    return (
+        0.5 * (P[a, 0] + P[b, 0]),
+        0.5 * (P[a, 1] + P[b, 1]),
+        0.5 * (P[a, 2] + P[b, 2]),
+        dx / w,
+        dy / w,
+        dz / w,
+        w,
+    )
+
+
 @njit(parallel=True, cache=True, error_model="numpy")
-def _mesh_kernel(M, A, Wd, inside, free, T, nodes, children, reg, model_f, cos_k, sin_k, switch, g, nthreads):
-    n = M.shape[0]
+def _mesh_kernel(
+    M, A, Wd, P, pi, pj, inside, free, T, nodes, children, reg, model_f, cos_k, sin_k, switch, g, nthreads
+):
+    n = inside.shape[0]
+    from_pairs = pi.shape[0] > 0  # the candidates as point index pairs (pi, pj) into P, not as M, A, Wd
     R = cos_k.shape[0]
     chunks = (n + _CHUNK - 1) // _CHUNK
     # thread t takes chunks t, t + T, ...: the work varies along the candidates' spatial order, and a static split
@@ -651,15 +701,18 @@ def _mesh_kernel(M, A, Wd, inside, free, T, nodes, children, reg, model_f, cos_k
                         todo |= np.uint64(1) << np.uint64(k)
                 if todo == 0:
                     continue
-                ax, ay, az = A[i, 0], A[i, 1], A[i, 2]
+                if from_pairs:
+                    mx, my, mz, ax, ay, az, wd = _pair_frame(P, pi[i], pj[i])
+                else:
+                    mx, my, mz, ax, ay, az, wd = M[i, 0], M[i, 1], M[i, 2], A[i, 0], A[i, 1], A[i, 2], Wd[i]
                 yx, yy, yz, zx, zy, zz = _basis(ax, ay, az, switch)
                 for rl in range(R):
                     c, s = cos_k[rl], sin_k[rl]
                     rot[rl, 0], rot[rl, 1], rot[rl, 2] = c * yx + s * zx, c * yy + s * zy, c * yz + s * zz
                     rot[rl, 3], rot[rl, 4], rot[rl, 5] = -s * yx + c * zx, -s * yy + c * zy, -s * yz + c * zz
-                _x_ranges(xr, inside[i], Wd[i], model_f)
+                _x_ranges(xr, inside[i], wd, model_f)
                 _region_boxes(xr, reg, rx, boxes_c, boxes_e)
-                F[0], F[1], F[2] = M[i, 0], M[i, 1], M[i, 2]
+                F[0], F[1], F[2] = mx, my, mz
                 F[3], F[4], F[5], F[6], F[7], F[8], F[9], F[10], F[11] = ax, ay, az, yx, yy, yz, zx, zy, zz
                 blocked = _walk(
                     F,

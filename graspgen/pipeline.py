@@ -206,9 +206,25 @@ class _Survivors:
 
     def keep(self, mask: np.ndarray, free: np.ndarray | None = None) -> _Survivors:
         """The pairs where `mask` holds (with the free rolls `free` instead of their own when given)."""
-        margin = self.hold_margin[mask] if self.hold_margin is not None else None
+        # the indices once, then a gather per array: a boolean mask per array finds them again each time (ring,
+        # 1.1 M pairs: 14 -> 4.5 ms)
+        idx = np.flatnonzero(mask)
+        margin = self.hold_margin.take(idx) if self.hold_margin is not None else None
         rolls = self.free if free is None else free
-        return _Survivors(self.i[mask], self.j[mask], rolls[mask], self.inside[mask], margin)
+        return _Survivors(self.i.take(idx), self.j.take(idx), rolls.take(idx, axis=0), self.inside.take(idx), margin)
+
+
+def _any_free(free: np.ndarray) -> np.ndarray:
+    """Per row of the (n, R) bool roll masks: is any roll free? Rows of whole 8-byte words are OR-ed as integers
+    (ring, 1.1 M x 16: 19 -> 2 ms against ndarray.any(axis=1))."""
+    n, rolls = free.shape
+    if rolls % 8 or not free.flags.c_contiguous:
+        return free.any(axis=1)
+    words = free.view(np.uint64).reshape(n, rolls // 8)
+    acc = words[:, 0].copy()
+    for c in range(1, rolls // 8):
+        acc |= words[:, c]
+    return acc != 0
 
 
 @dataclass(frozen=True)
@@ -322,7 +338,7 @@ def _collide(run: _Run, surface: _Surface, pairs: _Pairs) -> _Survivors:
             segment = max(int(rate * _COLLISION_REPORT_S), _MIN_SEGMENT)
             run.report("collision", (p0 + hi) / m)
             lo = hi
-        block_kept = _Survivors(bi, bj, free, bins).keep(free.any(axis=1))
+        block_kept = _Survivors(bi, bj, free, bins).keep(_any_free(free))
         n_kept += len(block_kept)
         if n_kept > MAX_CANDIDATES:
             raise InvalidParameterError(
@@ -340,6 +356,8 @@ def _collide(run: _Run, surface: _Surface, pairs: _Pairs) -> _Survivors:
     if not kept:
         e = np.zeros(0, dtype=np.int64)
         return _Survivors(e, e.copy(), np.zeros((0, rolls), dtype=bool), np.zeros(0, dtype=bool))
+    if len(kept) == 1:
+        return kept[0]  # one block (most runs): its arrays are already the survivors' own, no copy
     cat = np.concatenate
     return _Survivors(*(cat([getattr(s, k) for s in kept]) for k in ("i", "j", "free", "inside")))
 
@@ -376,13 +394,10 @@ def _check_mesh(run: _Run, surface: _Surface, pairs: _Pairs, survivors: _Survivo
     removed_rolls = 0
     checked = survivors
     if surface.tree is not None and len(survivors):
-        pts, s = surface.points, survivors
-        d = pts[s.j] - pts[s.i]
-        w = np.linalg.norm(d, axis=1)
-        mid = 0.5 * (pts[s.i] + pts[s.j])
-        exact = meshtree.mesh_free_rolls(surface.tree, mid, d / w[:, None], w, s.inside, s.free, pairs.model)
-        removed_rolls = int(s.free.sum() - exact.sum())
-        checked = s.keep(exact.any(axis=1), free=exact)
+        s = survivors
+        exact = meshtree.mesh_free_rolls_of_pairs(surface.tree, surface.points, s.i, s.j, s.inside, s.free, pairs.model)
+        removed_rolls = int(np.count_nonzero(s.free)) - int(np.count_nonzero(exact))
+        checked = s.keep(_any_free(exact), free=exact)
     run.timings["collision_mesh"] = time.perf_counter() - t0
     run.timings["collision"] += run.timings["collision_mesh"]
     return _MeshChecked(checked, removed_rolls, len(survivors) - len(checked))

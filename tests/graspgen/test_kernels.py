@@ -423,6 +423,55 @@ def test_free_rolls_of_pairs_equals_free_rolls_on_numpys_geometry(mode):
     assert free_rolls_of_pairs(pts, res.i[:0], res.j[:0], res.inside[:0], model, 16).shape == (0, 16)
 
 
+@pytest.mark.parametrize("mode", ["swept", "paper"])
+def test_mesh_free_rolls_of_pairs_equals_mesh_free_rolls_on_numpys_geometry(mode):
+    """The mesh-exact check's pipeline entry point (point index pairs; the kernel derives the geometry) gives the
+    very masks of mesh_free_rolls on midpoints, axes and widths made by numpy (outside and inside grasps, the
+    approach region, every roll and random subsets to test)."""
+    from graspgen.collision import approach_reach
+    from graspgen.meshtree import build_tree, mesh_free_rolls, mesh_free_rolls_of_pairs
+
+    mesh = _parts()["ring"]
+    pts, nrm = _sample(mesh, 1500)
+    tree = build_tree(mesh.vertices, mesh.faces)
+    res = antipodal_pairs(
+        pts, nrm, stroke=0.08, min_width=0.0, friction=0.5, safety_factor=1.5, inside=True, finger_thickness=0.01
+    )
+    assert len(res.i) > 1000 and res.inside.any() and not res.inside.all()
+    d = pts[res.j] - pts[res.i]
+    w = np.linalg.norm(d, axis=1)
+    mids, axes = 0.5 * (pts[res.i] + pts[res.j]), d / w[:, None]
+    model = collision_model(GRIPPER, mode, reach=approach_reach(pts) if mode == "swept" else 0.0)
+    rng = np.random.default_rng(11)
+    for free in (np.ones((len(w), 16), dtype=bool), rng.random((len(w), 16)) < 0.4):
+        want = mesh_free_rolls(tree, mids, axes, w, res.inside, free, model)
+        got = mesh_free_rolls_of_pairs(tree, pts, res.i, res.j, res.inside, free, model)
+        assert want.any() and (want != free).any()  # the triangles block some rolls and leave others
+        np.testing.assert_array_equal(got, want)
+    empty = np.zeros((0, 16), dtype=bool)
+    assert mesh_free_rolls_of_pairs(tree, pts, res.i[:0], res.j[:0], res.inside[:0], empty, model).shape == (0, 16)
+    two = np.ones((2, 16), dtype=bool)
+    with pytest.raises(ValueError, match="indices"):
+        mesh_free_rolls_of_pairs(tree, pts, np.array([0, len(pts)]), np.array([5, 7]), np.zeros(2, bool), two, model)
+    with pytest.raises(ValueError, match="one row per candidate"):
+        mesh_free_rolls_of_pairs(
+            tree, pts, np.array([0, 1]), np.array([5, 7]), np.zeros(3, bool), np.ones((2, 16), bool), model
+        )
+
+
+@pytest.mark.parametrize("rolls", [8, 12, 16, 64])
+def test_any_free_rows_equal_numpy(rolls):
+    """The pipeline's row test (8-byte words OR-ed as integers where the rows allow it) against ndarray.any."""
+    from graspgen.pipeline import _any_free
+
+    rng = np.random.default_rng(rolls)
+    free = rng.random((5000, rolls)) < 0.02  # many rows without a free roll, some with one anywhere in the row
+    assert 0 < free.any(axis=1).sum() < 5000
+    np.testing.assert_array_equal(_any_free(free), free.any(axis=1))
+    np.testing.assert_array_equal(_any_free(free[:, ::-1]), free.any(axis=1))  # not contiguous: numpy's path
+    assert _any_free(free[:0]).shape == (0,)
+
+
 def test_free_rolls_of_pairs_refuses_bad_indices():
     pts, _ = _sample(_parts()["box"], 200)
     model = collision_model(GRIPPER, "swept")
