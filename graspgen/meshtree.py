@@ -40,13 +40,16 @@ node tests at every node, not only at the leaves (ring +50 % in the walk); leave
 the noise, 8 40 % slower on the ring).
 Ninth session (the ring's 393,646 candidates as the pipeline passes them, 3.24 open rolls each; work counters in a
 throwaway copy of the kernel): the fingers are three quarters of the check (0.42 of 0.55 s), and their cost is the
-walk, not the triangles: 81 node visits per candidate end in 0.6 triangle tests. It is a finger in the ring's
-hole, where the whole inner wall lies within the finger's slab and radial band and only the per-roll tests at the
-leaves turn it away. Per-roll node tests for the fingers above the leaves, when at most L rolls are open: L = 1,
-2, 4, 16 gave 1.02, 1.07, 1.43, 1.49x the time (visits 83.6 down to 76.6 at best). Splitting the tree along
-(centroid, normal) where that gives thinner children, as collision.py's point tree does: ring 81.3 visits instead
-of 83.6 and 0.98x the time, tless_04 0.95x, at 1.6x the build time. Not kept, because neither gain is above the
-noise of the whole run.
+walk, not the triangles: 81 node visits per candidate end in 0.6 triangle tests. (The eleventh session's counters
+correct the reason given here before, a finger in the ring's hole: no candidate that reaches the check has a contact
+on the inner wall. All close along horizontal axes between two points of the outer wall, the fingers outside it. Per
+candidate 40 inner nodes pass a finger's slab and band tests and 2.3 the palm's, for 3.3 leaves reached: most likely
+the boxes of curved patches near a contact stick out past the rim and the outer wall by more than the 1 mm contact
+margin, and only their smaller descendants are turned away.) Per-roll node tests for the fingers above the leaves,
+when at most L rolls are open: L = 1, 2, 4, 16 gave 1.02, 1.07, 1.43, 1.49x the time (visits 83.6 down to 76.6 at
+best). Splitting the tree along (centroid, normal) where that gives thinner children, as collision.py's point tree
+does: ring 81.3 visits instead of 83.6 and 0.98x the time, tless_04 0.95x, at 1.6x the build time. Not kept, because
+neither gain is above the noise of the whole run.
 Tenth session (in-process A/B on the candidates of five parts at 10,000 points, interleaved, same masks): the
 oriented box per roll after the axis-aligned one passes, at the leaves and the palm's nodes: ring 0.93x, tless_04
 0.81x, tless_13 0.94x, idler riser 0.98x, featuretype 1.04x (0.05 s). Before the axis-aligned box instead: ring
@@ -54,6 +57,12 @@ oriented box per roll after the axis-aligned one passes, at the leaves and the p
 taken out of the walk where the mesh vertices' convex hull lies wholly in front of the palm (collision.py's
 hull certificate, on the vertices): ring 1.14x (the palm is a quarter of this check, and the rolls left free
 by the point test lie near the certificate's threshold, where its hill climbs cost more than the walk).
+Eleventh session (same A/B, the ring's 393,646 candidates; the palm is 0.08 of the check's 0.42 s): the fingers'
+per-roll tests above the leaves with the node's ball against each open roll's rectangle (1.21x: a node of 20 mm
+slivers has a ball of 10 mm or more, as wide as the finger, and prunes nothing), and with the boxes when at most 1
+or 2 rolls are open (1.05x, 1.20x); the node's oriented-box range along the axis computed only when its cheaper
+range meets a region's (1.02x). The pipeline now passes the point index pairs (mesh_free_rolls_of_pairs), as it does
+to the point test: no (n, 3) arrays.
 """
 
 from __future__ import annotations
