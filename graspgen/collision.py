@@ -63,14 +63,15 @@ along its rims. Taken out before the palm's remembered blockers instead of befor
 oracle run (certificates precomputed), at twice the lookups.
 Eleventh session (same A/B, the ring's 1,095,172 pairs, same masks): _CACHE 4 or 2 (1.10x, 1.39x); _MEMO_SLOTS 4
 (0.99x); _CHUNK 16,384 or 1,024 (1.04x, 1.01x); the palm's walk before the fingers' now that the hull settles its
-free rolls (1.06x); the stats counters in a per-thread row written once per chunk (1.02x: no false sharing to
-remove). The two threads' work counters differ by 3 %, and the kernel runs 1.84x faster on two threads than on one
-(the tree and hull, built on one thread per point set, included). Where the time goes: the 400,025 candidates that
-keep a free roll take 0.73 of the 0.85 s (all pairs: 0.85 s, the blocked ones alone 0.21 s); without the palm the
-kernel takes 0.37 s, without the palm's walk (memo, cache and hull only) 0.47 s. A node budget for the fingers' walk,
-its open rolls then left to the palm and the mesh-exact check (the final masks are the same: the triangles block
-whatever the points block): 8, 16 or 32 nodes gave 1.92x, 1.07x and 1.05x the time of the point test and the
-mesh-exact check together (2.6x, 1.27x and 1.11x as many candidates reach the triangles).
+free rolls (1.06x), and only where the fingers' remembered blockers blocked nothing (1.05x; tless_04 1.01x); the
+stats counters in a per-thread row written once per chunk (1.02x: no false sharing to remove). The two threads' work
+counters differ by 3 %, and the kernel runs 1.84x faster on two threads than on one (the tree and hull, built on one
+thread per point set, included). Where the time goes: the 400,025 candidates that keep a free roll take 0.73 of the
+0.85 s (all pairs: 0.85 s, the blocked ones alone 0.21 s); without the palm the kernel takes 0.37 s, without the
+palm's walk (memo, cache and hull only) 0.47 s. A node budget for the fingers' walk, its open rolls then left to the
+palm and the mesh-exact check (the final masks are the same: the triangles block whatever the points block): 8, 16
+or 32 nodes gave 1.92x, 1.07x and 1.05x the time of the point test and the mesh-exact check together (2.6x, 1.27x
+and 1.11x as many candidates reach the triangles).
 """
 
 from __future__ import annotations
