@@ -21,8 +21,10 @@ and cost more) the node's axis-aligned box by separating axes against the region
 along the closing axis, where all its triangles lie (cut, the palm, a stroke wide, and its approach, a part long,
 miss most nodes: on the thick ring the palm's triangle tests went from 277 to 2 per candidate), and where that
 passes, the node's oriented box the same way (its own three axes and the region's Y and Z): it hugs the thin
-patches of curved walls and slanted faces whose axis-aligned boxes are fat. At a leaf that
-meets a finger's slab, the range of the leaf's own vertices along the axis replaces its boxes'. A triangle is
+patches of curved walls and slanted faces whose axis-aligned boxes are fat. At a node of at
+most `_EXACT_TRIANGLES` triangles whose boxes meet a finger's slab, the range of its own distinct vertices along the
+axis replaces its boxes' (always at the leaves; above them, per size class, while it turns a finger away at least
+at every other try). A triangle is
 tested at the rolls its node met for that region, when its extent along the closing axis meets the region's.
 Every node test only prunes, with a guard band (1e-9 of the part's size) far beyond rounding; the answer is the
 triangle test's, so the masks are those of testing every triangle at every roll (tests/graspgen/test_kernels.py
@@ -67,11 +69,17 @@ to the point test: no (n, 3) arrays. Kept: at a leaf whose boxes meet a finger's
 vertices along the axis (the triangle loop skips a region by the same numbers, so the masks cannot change): ring
 0.886x, tless_04 0.99x, tless_13 1.01x, idler riser 1.03x, featuretype 1.09x (1 ms); the whole pipeline's (a)-(e) on
 the ring 1.569 -> 1.500 s (in process, 12 runs each, alternating). A numpy simulation of the fingers' walk (3,000
-ring candidates) had shown it: the vertices' range at nodes of up to 16, 32 or 64 triangles gives 46.6, 30.4 or 22.2
-visits instead of 85, and 1.4 leaves reached instead of 4.6. Measured: at nodes of up to 8 triangles ring 0.85x but
-featuretype 1.19x, tless_04 1.01x; up to 16 or 32 triangles, for every region, 0.99x and 1.07x on the ring (the
-vertices cost more than the visits they save); for every region, not only the fingers: ring 0.87x, tless_04 1.03x,
-featuretype 1.11x.
+ring candidates) showed more to gain: the vertices' range at nodes of up to 16, 32 or 64 triangles gives 46.6, 30.4
+or 22.2 visits instead of 85, and 1.4 leaves reached instead of 4.6. With every triangle's corners (duplicates
+included) it cost more than it saved (16 or 32 triangles, every region: ring 0.99x, 1.07x); with each node's
+distinct vertices, stored at build time, at up to 64 triangles: ring 0.69x, but tless_13 1.09x, featuretype 1.35x,
+the Sileane gear 1.43x (their candidates' nodes near a contact do meet the slab). Hence a tally per size class, per
+thread and chunk: above the leaves the range is taken while it turns a finger away at least at every other try (one
+in four or two in three: within 1 % of that). Against the leaf-only version, same masks: ring 0.674x (0.373 -> 0.251
+s), tless_04 1.025x, tless_10 1.055x, tless_13 1.01x, featuretype 1.03x, idler riser 1.025x, Sileane gear 1.04x, IPA
+ring screw 1.035x (0.3-2 ms each); the whole pipeline's (a)-(e) on the ring 1.593 -> 1.509 s. The distinct vertices
+take about twice the triangles' memory (an icosphere of 327,680 faces: 49 MB, its build 1.12 -> 1.17 s); the memory
+guard's probe measures them with the part.
 """
 
 from __future__ import annotations
@@ -88,16 +96,33 @@ __all__ = ["MeshTree", "build_tree", "normal_spread_rad", "mesh_free_rolls", "me
 _LEAF = 4
 _NODE = 23  # floats per tree node: see _build
 _CHUNK = 256  # candidates per unit of parallel work
+#: nodes of at most this many triangles keep their distinct vertices, for the exact range along the axis (_walk)
+_EXACT_TRIANGLES = 64
+#: per size class above the leaves, that range is taken while it has turned a finger away at least at every other
+#: try (counted per thread and chunk, after the first _EXACT_TRIES tries)
+_EXACT_TRIES = 32
 
 
 class MeshTree:
-    """Triangles (m, 3, 3) metres, their unit normals (m, 3), and the tree's arrays (see `build_tree`)."""
+    """Triangles (m, 3, 3) metres, their unit normals (m, 3), and the tree's arrays (see `build_tree`): per node
+    the box data and (left, right, start, count); for nodes of at most `_EXACT_TRIANGLES` triangles their distinct
+    vertices, verts[:, vstart[k]:vstart[k + 1]] (3, .) (none for larger nodes)."""
 
-    def __init__(self, triangles: np.ndarray, normals: np.ndarray, nodes: np.ndarray, children: np.ndarray):
+    def __init__(
+        self,
+        triangles: np.ndarray,
+        normals: np.ndarray,
+        nodes: np.ndarray,
+        children: np.ndarray,
+        vstart: np.ndarray,
+        verts: np.ndarray,
+    ):
         self.triangles = triangles
         self.normals = normals
         self.nodes = nodes
         self.children = children
+        self.vstart = vstart
+        self.verts = verts
 
     def __len__(self) -> int:
         return len(self.triangles)
@@ -121,7 +146,41 @@ def build_tree(vertices: np.ndarray, faces: np.ndarray) -> MeshTree:
     count = _build(np.ascontiguousarray(tri), order, nodes, children) if m else 0
     tri = np.ascontiguousarray(tri[order])
     n = np.ascontiguousarray(n[order])
-    return MeshTree(tri, n, nodes[:count].copy(), children[:count].copy())
+    children = children[:count].copy()
+    vstart, verts = _node_vertices(np.ascontiguousarray(F[keep][order]), V, children, _EXACT_TRIANGLES)
+    return MeshTree(tri, n, nodes[:count].copy(), children, vstart, verts)
+
+
+@njit(cache=True)
+def _node_vertices(faces, V, children, max_triangles):
+    """The distinct vertices (by index) of each node of at most `max_triangles` triangles, in (3, total) SoA with
+    offsets per node: a stamp per vertex index marks the ones a node has listed already."""
+    nn = children.shape[0]
+    vstart = np.zeros(nn + 1, dtype=np.int64)
+    stamp = np.full(V.shape[0], -1, dtype=np.int64)
+    for k in range(nn):
+        c = 0
+        if children[k, 3] <= max_triangles:
+            for t in range(children[k, 2], children[k, 2] + children[k, 3]):
+                for j in range(3):
+                    v = faces[t, j]
+                    if stamp[v] != k:
+                        stamp[v] = k
+                        c += 1
+        vstart[k + 1] = vstart[k] + c
+    verts = np.empty((3, vstart[nn]))
+    stamp[:] = -1
+    for k in range(nn):
+        q = vstart[k]
+        if children[k, 3] <= max_triangles:
+            for t in range(children[k, 2], children[k, 2] + children[k, 3]):
+                for j in range(3):
+                    v = faces[t, j]
+                    if stamp[v] != k:
+                        stamp[v] = k
+                        verts[0, q], verts[1, q], verts[2, q] = V[v, 0], V[v, 1], V[v, 2]
+                        q += 1
+    return vstart, verts
 
 
 @njit(cache=True)
@@ -435,6 +494,8 @@ def _run(tree, geometry, index, inside, free, model, switch) -> np.ndarray:
             np.ascontiguousarray(inside, dtype=np.bool_),
             out,
             tree.triangles,
+            tree.vstart,
+            tree.verts,
             tree.nodes,
             tree.children,
             reg,
@@ -514,21 +575,51 @@ def _oriented_in_frame(nodes, k, mx, my, mz, ax, ay, az, yx, yy, yz, zx, zy, zz,
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _leaf_x_range(T, start, count, mx, my, mz, ax, ay, az):
-    """The smallest and largest coordinate along the closing axis of the vertices of triangles start..start+count-1,
-    with the triangle loop's own arithmetic (_walk)."""
+def _vertex_x_range(verts, q0, q1, mx, my, mz, ax, ay, az):
+    """The smallest and largest coordinate along the closing axis of verts[:, q0:q1], with the triangle loop's own
+    arithmetic (_walk)."""
     lo = np.inf
     hi = -np.inf
-    for t in range(start, start + count):
-        for c in range(3):
-            v = (T[t, c, 0] - mx) * ax + (T[t, c, 1] - my) * ay + (T[t, c, 2] - mz) * az
-            lo = min(lo, v)
-            hi = max(hi, v)
+    for q in range(q0, q1):
+        v = (verts[0, q] - mx) * ax + (verts[1, q] - my) * ay + (verts[2, q] - mz) * az
+        lo = min(lo, v)
+        hi = max(hi, v)
     return lo, hi
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _meets_finger_slab(masks, top, blocked, rx, nreg, x_lo, x_hi):
+    """Does [x_lo, x_hi] meet the slab of a finger that still has rolls to test at stack entry `top`?"""
+    for r in range(min(nreg, 2)):  # noqa: SIM110 (numba compiles no generator passed to any())
+        if masks[top, r] & ~blocked and rx[r, 0] <= x_hi and x_lo <= rx[r, 1]:
+            return True
+    return False
+
+
 @njit(cache=True, error_model="numpy")
-def _walk(F, todo, T, nodes, children, reg, rx, boxes_c, boxes_e, rot, cos_k, sin_k, g, scratch, stack, masks, hit, ob):
+def _walk(
+    F,
+    todo,
+    T,
+    vstart,
+    verts,
+    tally,
+    nodes,
+    children,
+    reg,
+    rx,
+    boxes_c,
+    boxes_e,
+    rot,
+    cos_k,
+    sin_k,
+    g,
+    scratch,
+    stack,
+    masks,
+    hit,
+    ob,
+):
     """The rolls of `todo` at which some triangle meets some region box, for the candidate with midpoint F[0:3]
     and roll-0 frame X, Y0, Z0 = F[3:6], F[6:9], F[9:12]: one walk of the tree carrying, per region, the rolls
     still to test. Its own function, called from the parallel loop: inlined in the loop's body, the same code
@@ -572,15 +663,22 @@ def _walk(F, todo, T, nodes, children, reg, rx, boxes_c, boxes_e, rot, cos_k, si
         x_lo = max(x - xh, ox - oh) - g
         x_hi = min(x + xh, ox + oh) + g
         inner = children[k, 0] >= 0
-        if not inner:
-            # a leaf whose boxes meet a finger's slab: the range of its own vertices instead. The boxes of a
-            # curved patch stick out past a contact's 1 mm margin where its triangles do not, and the triangle
-            # loop below skips a region by these very numbers, so this only prunes what it would skip
-            for r in range(min(nreg, 2)):
-                if masks[top, r] & ~blocked and rx[r, 0] <= x_hi and x_lo <= rx[r, 1]:
-                    e_lo, e_hi = _leaf_x_range(T, children[k, 2], children[k, 3], mx, my, mz, ax, ay, az)
-                    x_lo, x_hi = max(x_lo, e_lo - g), min(x_hi, e_hi + g)
-                    break
+        if vstart[k + 1] > vstart[k] and _meets_finger_slab(masks, top, blocked, rx, nreg, x_lo, x_hi):
+            # a small node whose boxes meet a finger's slab: the range of its own vertices instead. The boxes of a
+            # curved patch stick out past a contact's 1 mm margin where its triangles do not; the triangle loop
+            # below skips a region by the same numbers, so this only prunes what it would skip. Above the leaves
+            # only while it pays: per size class, while it turns a finger away at least at every other try
+            cls = 0
+            c = children[k, 3]
+            while c > _LEAF:
+                c >>= 1
+                cls += 1
+            if cls == 0 or tally[cls, 0] < _EXACT_TRIES or 2 * tally[cls, 1] >= tally[cls, 0]:
+                e_lo, e_hi = _vertex_x_range(verts, vstart[k], vstart[k + 1], mx, my, mz, ax, ay, az)
+                x_lo, x_hi = max(x_lo, e_lo - g), min(x_hi, e_hi + g)
+                tally[cls, 0] += 1
+                if not _meets_finger_slab(masks, top, blocked, rx, nreg, x_lo, x_hi):
+                    tally[cls, 1] += 1
         any_hit = np.uint64(0)
         have_ob = False
         for r in range(nreg):
@@ -714,7 +812,26 @@ def _pair_frame(P, a, b):
 
 @njit(parallel=True, cache=True, error_model="numpy")
 def _mesh_kernel(
-    M, A, Wd, P, pi, pj, inside, free, T, nodes, children, reg, model_f, cos_k, sin_k, switch, g, nthreads
+    M,
+    A,
+    Wd,
+    P,
+    pi,
+    pj,
+    inside,
+    free,
+    T,
+    vstart,
+    verts,
+    nodes,
+    children,
+    reg,
+    model_f,
+    cos_k,
+    sin_k,
+    switch,
+    g,
+    nthreads,
 ):
     n = inside.shape[0]
     from_pairs = pi.shape[0] > 0  # the candidates as point index pairs (pi, pj) into P, not as M, A, Wd
@@ -734,7 +851,9 @@ def _mesh_kernel(
         masks = np.empty((128, 3), dtype=np.uint64)  # per stack entry and region: the rolls to test
         hit = np.empty(3, dtype=np.uint64)
         ob = np.empty(15)  # a node's oriented box in the candidate's roll-0 frame
+        tally = np.zeros((8, 2), dtype=np.int64)  # per size class: exact ranges taken, and fingers turned away
         for ch in range(t, chunks, nthreads):
+            tally[:, :] = 0
             for i in range(ch * _CHUNK, min(n, (ch + 1) * _CHUNK)):
                 todo = np.uint64(0)
                 for k in range(R):
@@ -759,6 +878,9 @@ def _mesh_kernel(
                     F,
                     todo,
                     T,
+                    vstart,
+                    verts,
+                    tally,
                     nodes,
                     children,
                     reg,

@@ -585,6 +585,32 @@ def _mesh_free_rolls_brute(tree, mids, axes, widths, inside, model, rolls):
     return out
 
 
+def test_mesh_tree_lists_each_small_nodes_distinct_vertices():
+    """The exact range along the axis (meshtree._walk) reads a node's distinct vertices: for every node of at most
+    _EXACT_TRIANGLES triangles exactly the corners of its triangles, once each, and nothing for larger nodes (also
+    with degenerate triangles dropped from the tree, which shift the faces' indices)."""
+    from graspgen.meshtree import _EXACT_TRIANGLES, build_tree
+
+    ring = _parts()["ring"]
+    faces = np.vstack([ring.faces, [[0, 0, 1], [2, 2, 2]]])  # two degenerate triangles, dropped by the tree
+    for vertices, fs in ((ring.vertices, faces), (trimesh.creation.icosphere(subdivisions=4).vertices, None)):
+        if fs is None:
+            fs = trimesh.creation.icosphere(subdivisions=4).faces
+        tree = build_tree(vertices, fs)
+        assert len(tree) == len(fs) - (2 if fs is faces else 0)
+        small = 0
+        for k in range(len(tree.nodes)):
+            start, count = tree.children[k, 2], tree.children[k, 3]
+            listed = tree.verts[:, tree.vstart[k] : tree.vstart[k + 1]].T
+            if count > _EXACT_TRIANGLES:
+                assert len(listed) == 0
+                continue
+            small += 1
+            corners = {tuple(v) for v in tree.triangles[start : start + count].reshape(-1, 3)}
+            assert len(listed) == len(corners) and {tuple(v) for v in listed} == corners
+        assert small > len(tree.nodes) // 2
+
+
 @pytest.mark.parametrize("name", ["ring", "u", "cylinder", "box"])
 def test_mesh_free_rolls_equal_brute_force(name):
     """The mesh-exact check's tree walk (its node tests and their cuts only prune) gives what testing every
