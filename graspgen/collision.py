@@ -863,6 +863,24 @@ def _climb(W, start, adj, v, ux, uy, uz, shift, stop):
     return v, best
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _pair_frame(P, a, b):
+    """Midpoint, unit axis and width of the candidate (P[a], P[b]) with numpy's arithmetic for 0.5 (p_a + p_b),
+    d / |d| and |d| (d = p_b - p_a; the squares added in numpy's order), bit for bit: both kernels' pair entry
+    points (free_rolls_of_pairs, meshtree.mesh_free_rolls_of_pairs) give the masks of their geometry entry points."""
+    dx, dy, dz = P[b, 0] - P[a, 0], P[b, 1] - P[a, 1], P[b, 2] - P[a, 2]
+    w = np.sqrt(dx * dx + dy * dy + dz * dz)
+    return (
+        0.5 * (P[a, 0] + P[b, 0]),
+        0.5 * (P[a, 1] + P[b, 1]),
+        0.5 * (P[a, 2] + P[b, 2]),
+        dx / w,
+        dy / w,
+        dz / w,
+        w,
+    )
+
+
 @njit(cache=True, error_model="numpy")
 def _chunk(
     lo,
@@ -912,15 +930,7 @@ def _chunk(
         xr[r, 1] = reg[r, _PX]
     for q in range(lo, hi):
         if from_pairs:
-            # numpy's arithmetic for 0.5 (p_i + p_j), d / |d| and |d|, bit for bit (the squares are added
-            # in numpy's order), so both entry points give the same masks
-            a, b = pi[q], pj[q]
-            dx, dy, dz = P[b, 0] - P[a, 0], P[b, 1] - P[a, 1], P[b, 2] - P[a, 2]
-            w = np.sqrt(dx * dx + dy * dy + dz * dz)
-            ax, ay, az = dx / w, dy / w, dz / w
-            F[0] = 0.5 * (P[a, 0] + P[b, 0])
-            F[1] = 0.5 * (P[a, 1] + P[b, 1])
-            F[2] = 0.5 * (P[a, 2] + P[b, 2])
+            F[0], F[1], F[2], ax, ay, az, w = _pair_frame(P, pi[q], pj[q])
         else:
             w = widths[q]
             ax, ay, az = axes[q, 0], axes[q, 1], axes[q, 2]

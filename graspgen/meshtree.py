@@ -89,7 +89,7 @@ import numpy as np
 from numba import njit, prange
 
 from . import libm
-from .collision import CollisionModel, _basis, _check_pairs, _regions, _x_range_constants, _x_ranges
+from .collision import CollisionModel, _basis, _check_pairs, _pair_frame, _regions, _x_range_constants, _x_ranges
 
 __all__ = ["MeshTree", "build_tree", "normal_spread_rad", "mesh_free_rolls", "mesh_free_rolls_of_pairs"]
 
@@ -477,7 +477,8 @@ def _run(tree, geometry, index, inside, free, model, switch) -> np.ndarray:
     switch = ROLL_REFERENCE_SWITCH if switch is None else switch
     free = np.ascontiguousarray(free, dtype=bool)
     n, R = free.shape
-    if len(inside) != n or (len(index[1]) not in (0, n)) or (len(index[1]) == 0 and len(geometry[0]) != n):
+    rows = len(index[1]) if len(index[0]) else len(geometry[0])  # index pairs (points given), else the geometry
+    if len(inside) != n or rows != n:
         raise ValueError("the candidates' geometry, inside and free must have one row per candidate")
     out = free.copy()
     if n == 0 or len(tree) == 0:
@@ -791,23 +792,6 @@ def _region_boxes(xr, reg, rx, boxes_c, boxes_e):
         boxes_e[r, 1] = reg[r, 0]
         boxes_c[r, 2] = 0.5 * (reg[r, 1] + reg[r, 2])
         boxes_e[r, 2] = 0.5 * (reg[r, 2] - reg[r, 1])
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _pair_frame(P, a, b):
-    """Midpoint, unit axis and width of the candidate (P[a], P[b]) with numpy's arithmetic for 0.5 (p_a + p_b),
-    d / |d| and |d| (d = p_b - p_a), bit for bit, as collision._chunk makes them."""
-    dx, dy, dz = P[b, 0] - P[a, 0], P[b, 1] - P[a, 1], P[b, 2] - P[a, 2]
-    w = np.sqrt(dx * dx + dy * dy + dz * dz)
-    return (
-        0.5 * (P[a, 0] + P[b, 0]),
-        0.5 * (P[a, 1] + P[b, 1]),
-        0.5 * (P[a, 2] + P[b, 2]),
-        dx / w,
-        dy / w,
-        dz / w,
-        w,
-    )
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
