@@ -22,6 +22,7 @@ import numpy as np
 from numba import njit, prange
 
 from . import libm
+from .collision import popcount
 
 __all__ = [
     "PairResult",
@@ -121,14 +122,6 @@ def _count_run(X, Y, Z, NX, NY, NZ, C2, i, start, stop, lims, inside_ok):
     return n_acc, n_bad, n_ab, n_c
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def _popcount(v):
-    v = v - ((v >> np.uint64(1)) & np.uint64(0x5555555555555555))
-    v = (v & np.uint64(0x3333333333333333)) + ((v >> np.uint64(2)) & np.uint64(0x3333333333333333))
-    v = (v + (v >> np.uint64(4))) & np.uint64(0x0F0F0F0F0F0F0F0F)
-    return (v * np.uint64(0x0101010101010101)) >> np.uint64(56)
-
-
 @njit(cache=True, error_model="numpy")
 def _fill_run(X, Y, Z, NX, NY, NZ, C2, i, start, stop, lims, inside_ok, out_j, out_inside, pos, end):
     # 64 pairs at a time: their verdicts packed into a word by a branch-free (vectorised) loop, then the few
@@ -144,7 +137,7 @@ def _fill_run(X, Y, Z, NX, NY, NZ, C2, i, start, stop, lims, inside_ok, out_j, o
             ins_w |= np.uint64(ins) << np.uint64(t)
         while acc_w:
             low = acc_w & (~acc_w + np.uint64(1))
-            out_j[pos] = b0 + np.int64(_popcount(low - np.uint64(1)))
+            out_j[pos] = b0 + np.int64(popcount(low - np.uint64(1)))
             out_inside[pos] = (ins_w & low) != np.uint64(0)
             pos += 1
             acc_w ^= low

@@ -50,6 +50,7 @@ __all__ = [
     "EXACT_LIMIT",
     "DRAWS",
     "STAGE_TWO_EXACT_LIMIT",
+    "compile_parallel_kernels",
 ]
 
 #: kmedoids() defaults, also used by two_stage(): full-matrix FasterPAM up to this many points (128 MB), ...
@@ -265,6 +266,13 @@ def _assign(X: np.ndarray, C: np.ndarray, metric: int, threads: bool = True) -> 
     """(n,) int32 nearest row of C for every row of X (first one on ties), (n,) float64 distance to it."""
     big = threads and X.shape[0] * C.shape[0] >= _PARALLEL_MIN_WORK
     return (_assign_parallel if big else _assign_serial)(X, C, metric)
+
+
+def compile_parallel_kernels() -> None:
+    """Run the parallel nearest-medoid assignment once on an input just large enough to take it, so that numba
+    compiles it (graspgen warmup): small runs take the serial kernel only."""
+    X = np.ascontiguousarray(np.random.default_rng(0).random((_PARALLEL_MIN_WORK // 16 + 1, 3)))
+    _assign(X, np.ascontiguousarray(X[:16]), 0)
 
 
 @njit(cache=True, nogil=True)

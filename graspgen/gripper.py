@@ -9,6 +9,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from .collision import Box, GripperSolids
 from .errors import InvalidGripperError
 
 __all__ = ["GripperSpec", "Box", "SLUG_PATTERN"]
@@ -21,14 +22,6 @@ _OPTIONAL = ("min_width", "palm_depth", "palm_width", "grip_force")
 _MAX_LENGTH = 2.0
 #: newtons per finger; industrial parallel grippers stay well below this
 _MAX_FORCE = 100_000.0
-
-
-@dataclass(frozen=True)
-class Box:
-    """An axis-aligned box in the grasp frame: centre (3,) and full extents (3,), metres."""
-
-    center: tuple[float, float, float]
-    extents: tuple[float, float, float]
 
 
 @dataclass(frozen=True)
@@ -111,27 +104,24 @@ class GripperSpec:
             return self
         return GripperSpec(**{**self.to_dict(), "friction": friction})
 
-    # -- geometry in the grasp frame ------------------------------------------------------------------------------
+    # -- geometry in the grasp frame (graspgen.collision.GripperSolids is the one description) ---------------------
+    def solids(self) -> GripperSolids:
+        """The gripper's solids in the grasp frame."""
+        return GripperSolids.of(self)
+
     def open_width(self, width: float) -> float:
         """Pre-grasp opening for a contact distance `width`: min(width + clearance, stroke)."""
-        return min(width + self.pregrasp_clearance, self.stroke)
+        return self.solids().open_width(width)
 
     def finger_boxes(self, width: float) -> tuple[Box, Box]:
         """The two finger boxes at closing width `width`, inner faces at x = -+width/2."""
-        cx = width / 2 + self.finger_thickness / 2
-        ext = (self.finger_thickness, self.finger_width, self.finger_depth)
-        return Box((-cx, 0.0, 0.0), ext), Box((cx, 0.0, 0.0), ext)
+        return self.solids().fingers(width)
 
     def palm_box(self) -> Box | None:
-        if self.palm_depth <= 0:
-            return None
-        half_x = self.stroke / 2 + self.finger_thickness
-        z_top = -self.finger_depth / 2
-        return Box((0.0, 0.0, z_top - self.palm_depth / 2), (2 * half_x, float(self.palm_width), self.palm_depth))
+        return self.solids().palm
 
     def boxes(self, width: float) -> list[Box]:
-        palm = self.palm_box()
-        return [*self.finger_boxes(width), *([palm] if palm else [])]
+        return self.solids().boxes(width)
 
 
 def _check_number(field: str, value: Any, *, positive: bool) -> None:

@@ -39,6 +39,11 @@ class Tolerances:
     contact_slack: float = 1.0e-6
     #: pairs closer than this are the same point, never a grasp
     min_pair_distance: float = 1.0e-9
+    #: relative guard band of the collision kernels' shortcuts (node bounds, radial bands, the half-turn symmetry):
+    #: far beyond the rounding of their arithmetic, so that a shortcut never decides what the exact test would not
+    guard: float = 1.0e-9
+    #: absolute floor of that band, metres (for a part of zero extent)
+    guard_floor: float = 1.0e-15
 
 
 TOLERANCES = Tolerances()

@@ -768,7 +768,7 @@ class _Grasp:
         if not self.inside:  # inner faces at the pre-grasp opening, closing inwards
             self.q_open = max((spec.stroke - spec.open_width(width)) / 2, 0.0)
         else:  # inside grasps mirror the fingers: outer faces at the narrower pre-grasp width, opening outwards
-            o = max(width - spec.pregrasp_clearance, spec.min_width + 2 * spec.finger_thickness)
+            o = spec.solids().open_width(width, inside=True)
             self.q_open = min(max(spec.stroke / 2 - (o / 2 - spec.finger_thickness), 0.0), spec.stroke / 2)
         # the approach starts where the fingers' leading edge (z = +finger_depth / 2) is below the part's lowest point
         z = (sim.vertices @ self.R0.T + self.p0)[:, 2]

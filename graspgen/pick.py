@@ -399,27 +399,22 @@ def _filter(
     if P == 0 or n_cone == 0:
         return ok, cos_z, {"approach": removed_cone, "planes": 0, "per_plane": [0] * P}
     sub = near.T  # (12, k') view
-    g = index.gripper
-    ft, fw, fd = g.finger_thickness, g.finger_width, g.finger_depth
+    solids = index.gripper.solids()
+    ft = solids.finger_thickness
     width = index.width if inside_cone is None else index.width[inside_cone]
     grasp_reach = width / 2 + ft  # outer face of a finger at the grasp, along X
-    open_reach = np.minimum(width + g.pregrasp_clearance, g.stroke) / 2 + ft  # and at the pre-grasp
+    open_reach = solids.open_width(width) / 2 + ft  # and at the pre-grasp
     clear = np.ones(n_cone, dtype=bool)
     per_plane: list[int] = []
     for j in range(P):
         n_obj = R_wo.T @ normals[j]  # the plane normal in the object frame; m = (X.n, Y.n, Z.n) in the grasp frame
         mx, my, mz = np.abs(_dot(sub[0:3], n_obj)), np.abs(_dot(sub[3:6], n_obj)), _dot(sub[6:9], n_obj)
-        amz = np.abs(mz)
         h0 = _dot(sub[9:12], n_obj)
         h0 += normals[j] @ t_wo - offsets[j]  # the grasp origin's height above the plane
         h_pre = h0 - distance * mz  # the pre-grasp origin's
-        # a box's lowest corner lies sum_i |m_i| h_i below its centre (h: half extents); for both fingers that is
-        # |mx| (reach) + |my| fw/2 + |mz| fd/2 below the origin
-        side = my * (fw / 2) + amz * (fd / 2)
+        side, palm = solids.plane_offsets(mx, my, mz)
         lowest = np.minimum(h0 - mx * grasp_reach, h_pre - mx * open_reach) - side
-        if g.palm_depth > 0:
-            zc = -fd / 2 - g.palm_depth / 2
-            palm = mz * zc - mx * (g.stroke / 2 + ft) - my * (g.palm_width / 2) - amz * (g.palm_depth / 2)
+        if palm is not None:
             lowest = np.minimum(lowest, np.minimum(h0, h_pre) + palm)
         inside = lowest >= -PLANE_TOLERANCE
         per_plane.append(n_cone - int(np.count_nonzero(inside)))
@@ -488,7 +483,7 @@ def _grasps_out(
         "quaternion_xyzw": [matrix_to_quaternion_xyzw(R).tolist() for R in T_wg[:, :3, :3]],
         "T_world_pregrasp": T_wp.tolist(),
         "width": width.tolist(),
-        "open_width": np.minimum(width + g.pregrasp_clearance, g.stroke).tolist(),
+        "open_width": g.solids().open_width(width).tolist(),
         "roll_deg": np.degrees(index.roll_angles_rad[index.roll_index[chosen]]).tolist(),
         "roll_index": index.roll_index[chosen].tolist(),
         "approach_angle_deg": np.degrees(libm.arccos(np.clip(cos_z[chosen], -1.0, 1.0))).tolist(),

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import trimesh
 
-from . import antipodal, clustering, libm, meshtree, quality, sampling
+from . import antipodal, clustering, libm, quality, sampling
 from . import collision as _collision
 from . import hold as _hold
 from .coverage import coverage
@@ -89,7 +89,7 @@ def generate(
     kg/m^3 times the mesh volume) and the gripper's `grip_force`, only candidates that hold the part against its
     weight plus `accel` in every direction are kept (`hold="off"` skips it). `position_tolerance` (m): criterion
     (c) holds for every surface normal within this distance of each contact. Every free roll is checked against
-    the mesh's triangles (meshtree.py).
+    the mesh's triangles (graspgen.collision).
     """
     report = progress or _noop
     options = QualityOptions(select=select, validate=validate, repair_limit=repair_limit, sim_workers=sim_workers)
@@ -177,7 +177,7 @@ class _Surface:
     normals: np.ndarray  # (k, 3) float64, unit, outward
     spacing: float  # mean nearest-neighbour distance, metres
     min_spacing: float
-    tree: meshtree.MeshTree | None  # None for a point cloud
+    tree: _collision.MeshTree | None  # None for a point cloud
     #: per point, the largest angle (rad) to a surface normal within the position tolerance; None: nothing near
     spread: np.ndarray | None
 
@@ -212,19 +212,6 @@ class _Survivors:
         margin = self.hold_margin.take(idx) if self.hold_margin is not None else None
         rolls = self.free if free is None else free
         return _Survivors(self.i.take(idx), self.j.take(idx), rolls.take(idx, axis=0), self.inside.take(idx), margin)
-
-
-def _any_free(free: np.ndarray) -> np.ndarray:
-    """Per row of the (n, R) bool roll masks: is any roll free? Rows of whole 8-byte words are OR-ed as integers
-    (ring, 1.1 M x 16: 19 -> 2 ms against ndarray.any(axis=1))."""
-    n, rolls = free.shape
-    if rolls % 8 or not free.flags.c_contiguous:
-        return free.any(axis=1)
-    words = free.view(np.uint64).reshape(n, rolls // 8)
-    acc = words[:, 0].copy()
-    for c in range(1, rolls // 8):
-        acc |= words[:, c]
-    return acc != 0
 
 
 @dataclass(frozen=True)
@@ -277,7 +264,7 @@ def _sample(run: _Run, part: Part) -> _Surface:
     order = antipodal.grid_order(sample.points, cell)
     pts, nrm = sample.points[order], sample.normals[order]
     t1 = time.perf_counter()
-    tree = meshtree.build_tree(part.mesh.vertices, part.mesh.faces) if part.mesh is not None else None
+    tree = _collision.build_tree(part.mesh.vertices, part.mesh.faces) if part.mesh is not None else None
     spread = _normal_spread(tree, pts, nrm, params.position_tolerance)
     run.timings["sample"] = time.perf_counter() - t0
     run.timings["sample_mesh_tree"] = time.perf_counter() - t1
@@ -338,7 +325,7 @@ def _collide(run: _Run, surface: _Surface, pairs: _Pairs) -> _Survivors:
             segment = max(int(rate * _COLLISION_REPORT_S), _MIN_SEGMENT)
             run.report("collision", (p0 + hi) / m)
             lo = hi
-        block_kept = _Survivors(bi, bj, free, bins).keep(_any_free(free))
+        block_kept = _Survivors(bi, bj, free, bins).keep(_collision.any_free(free))
         n_kept += len(block_kept)
         if n_kept > MAX_CANDIDATES:
             raise InvalidParameterError(
@@ -388,16 +375,18 @@ def _hold_part(run: _Run, loaded: _Loaded, surface: _Surface, survivors: _Surviv
 
 
 def _check_mesh(run: _Run, surface: _Surface, pairs: _Pairs, survivors: _Survivors) -> _MeshChecked:
-    """Every free roll tested again against the part's triangles (mesh-exact criterion (d); meshtree.py), only on
+    """Every free roll tested again against the part's triangles (mesh-exact criterion (d), graspgen.collision), only on
     what (e) left. A point cloud has no triangles: its survivors stay as they are."""
     t0 = time.perf_counter()
     removed_rolls = 0
     checked = survivors
     if surface.tree is not None and len(survivors):
         s = survivors
-        exact = meshtree.mesh_free_rolls_of_pairs(surface.tree, surface.points, s.i, s.j, s.inside, s.free, pairs.model)
+        exact = _collision.mesh_free_rolls_of_pairs(
+            surface.tree, surface.points, s.i, s.j, s.inside, s.free, pairs.model
+        )
         removed_rolls = int(np.count_nonzero(s.free)) - int(np.count_nonzero(exact))
-        checked = s.keep(_any_free(exact), free=exact)
+        checked = s.keep(_collision.any_free(exact), free=exact)
     run.timings["collision_mesh"] = time.perf_counter() - t0
     run.timings["collision"] += run.timings["collision_mesh"]
     return _MeshChecked(checked, removed_rolls, len(survivors) - len(checked))
@@ -499,7 +488,7 @@ def _normal_spread(tree, pts, nrm, tolerance: float) -> np.ndarray | None:
     if tolerance <= 0 or len(pts) == 0:
         return None
     if tree is not None:
-        spread = meshtree.normal_spread_rad(tree, pts, nrm, tolerance)
+        spread = _collision.normal_spread_rad(tree, pts, nrm, tolerance)
     else:
         from scipy.spatial import cKDTree
 

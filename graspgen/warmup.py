@@ -77,10 +77,9 @@ def warmup(*, log: Any = None) -> dict[str, Any]:
     step("render", lambda: render_grasp_set(part.mesh, gs.to_json(), size=(64, 48)))
     step("memory probe", lambda: probe(part, EXAMPLE_GRIPPER))
     # the small runs above assign clusters serially; a real part's candidates take the parallel kernel
-    from .clustering import _PARALLEL_MIN_WORK, _assign
+    from .clustering import compile_parallel_kernels
 
-    many = np.ascontiguousarray(rng.random((_PARALLEL_MIN_WORK // 16 + 1, 3)))
-    step("clustering, parallel assignment", lambda: _assign(many, np.ascontiguousarray(many[:16]), 0))
+    step("clustering, parallel assignment", compile_parallel_kernels)
     root = cache_dir()
     return {
         "seconds": time.perf_counter() - t_all,

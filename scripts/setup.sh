@@ -15,7 +15,7 @@ if [ "$(cat .venv/.setup-stamp 2>/dev/null)" != "$stamp" ]; then
 fi
 # numba's kernels compiled into its on-disk cache (graspgen/__pycache__, or NUMBA_CACHE_DIR) whenever graspgen's
 # sources or the dependencies changed, so the first job after set-up does not compile them (1-2 min cold)
-wstamp=$(cat graspgen/*.py .venv/.setup-stamp | sha256sum | cut -d' ' -f1)
+wstamp=$(find graspgen -name "*.py" | sort | xargs cat .venv/.setup-stamp | sha256sum | cut -d' ' -f1)
 if [ "$(cat .venv/.warmup-stamp 2>/dev/null)" != "$wstamp" ]; then
   if .venv/bin/graspgen warmup --quiet; then
     echo "$wstamp" > .venv/.warmup-stamp

@@ -15,9 +15,9 @@ import trimesh
 from numba import njit
 
 import graspgen
-from graspgen import hold, meshtree
+from graspgen import hold
 from graspgen.antipodal import cone_half_angle_rad, pair_plan
-from graspgen.collision import collision_model
+from graspgen.collision import build_tree, collision_model, mesh_free_rolls, normal_spread_rad
 from graspgen.errors import InvalidParameterError
 from graspgen.parts import load_part
 from graspgen.sampling import sample_surface
@@ -219,18 +219,18 @@ def test_sphere_gets_point_contact_torsion_and_a_flat_face_a_patch():
 
 def test_contact_half_a_millimetre_from_an_edge_fails_friction_under_the_default_tolerance():
     cube = trimesh.creation.box(extents=(0.04, 0.04, 0.04))
-    tree = meshtree.build_tree(cube.vertices, cube.faces)
+    tree = build_tree(cube.vertices, cube.faces)
     # two contacts on the +-z faces, squeezed along z: 0.5 mm and 3 mm from the edge at x = +20 mm
     for dist, expect in ((0.0005, False), (0.003, True)):
         x = 0.02 - dist
         pts = np.array([[x, 0.0, -0.02], [x, 0.0, 0.02]])
         nrm = np.array([[0.0, 0.0, -1.0], [0.0, 0.0, 1.0]])
-        spread = meshtree.normal_spread_rad(tree, pts, nrm, 0.001)
+        spread = normal_spread_rad(tree, pts, nrm, 0.001)
         plan = pair_plan(pts, nrm, spread=spread, **_PAIR_KW)
         assert (plan.accepted == 1) is expect, (dist, np.degrees(spread))
         assert plan.rejected_tolerance == (0 if expect else 1) and plan.rejected_friction == 0
     # with no tolerance the contact near the edge is a face contact again
-    assert np.all(meshtree.normal_spread_rad(tree, pts, nrm, 0.0) == 0)
+    assert np.all(normal_spread_rad(tree, pts, nrm, 0.0) == 0)
 
 
 def test_generate_removes_edge_contacts_with_the_tolerance():
@@ -432,14 +432,14 @@ def test_mesh_check_finds_a_feature_between_samples():
     fin = trimesh.creation.box(extents=(0.0004, 0.03, 0.008))
     fin.apply_translation((0.0, 0.0, 0.014))  # from z = 10 to 18 mm; the palm starts 15 mm from the axis
     mesh = trimesh.util.concatenate([base, fin])
-    tree = meshtree.build_tree(mesh.vertices, mesh.faces)
+    tree = build_tree(mesh.vertices, mesh.faces)
     model = collision_model(graspgen.GripperSpec.from_dict(GRIPPER), "swept")
     mid, axis, width = np.array([[0.0, 0.0, 0.0]]), np.array([[1.0, 0.0, 0.0]]), np.array([0.02])
     inside = np.array([False])
     # the samples of the base alone: as if every sample had fallen beside the fin
     bp, bn = _sample(base, 3000)
     by_points = free_rolls(bp, bn, mid, axis, width, inside, model, 16)
-    exact = meshtree.mesh_free_rolls(tree, mid, axis, width, inside, by_points, model)
+    exact = mesh_free_rolls(tree, mid, axis, width, inside, by_points, model)
     frames = grasp_frames(np.repeat(mid, 16, 0), np.repeat(axis, 16, 0), 2 * np.pi * np.arange(16) / 16)
     palm_over_fin = frames[:, 2, 2] < -0.9  # the grasp's +Z points down: the palm lies above, on the fin
     palm_below = frames[:, 2, 2] > 0.9
@@ -474,8 +474,8 @@ def test_the_approach_behind_the_palm_is_checked():
     model = collision_model(spec, "swept", reach=reach)
     by_points = free_rolls(pts, nrm, mid, axis, width, inside, model, 16)
     assert not by_points[0, palm_down].any() and by_points[0, palm_up].all()
-    tree = meshtree.build_tree(mesh.vertices, mesh.faces)
-    exact = meshtree.mesh_free_rolls(tree, mid, axis, width, inside, static, model)
+    tree = build_tree(mesh.vertices, mesh.faces)
+    exact = mesh_free_rolls(tree, mid, axis, width, inside, static, model)
     assert not exact[0, palm_down].any() and exact[0, palm_up].all()
     # the paper's static test knows no approach
     assert collision_model(spec, "paper", reach=reach).palm is None

@@ -198,20 +198,21 @@ def test_free_rolls_with_the_approach_equal_reference(name):
 
 
 def test_hull_support_bounds_the_points_and_settles_rolls_exactly():
-    """The palm's certificate (_hull, _hull_free): the cube map's bound is above every sample point's reach along
+    """The palm's certificate (build_hull, hull_free): the cube map's bound is above every sample point's reach along
     random directions, and for random frames the rolls it calls free are exactly those at which no point lies
     behind the threshold (brute force over all points), with both outcomes present."""
-    from graspgen.collision import _cube_cell, _hull, _hull_free
+    from graspgen.collision._frame import Rolls
+    from graspgen.collision._hull import build_hull, cube_cell, hull_free
 
     pts, _ = _sample(_parts()["u"], 3000, seed=4)
-    hull = _hull(pts)
-    V, _, _, bound, _, info = hull
+    hull = build_hull(pts, 0.0)
+    bound, info = hull.bound, hull.info
     o, n = info[:3], int(info[3])
     rng = np.random.default_rng(7)
     U = rng.normal(size=(5000, 3))
     U /= np.linalg.norm(U, axis=1)[:, None]
     reach = ((pts - o) @ U.T).max(axis=0)
-    cells = np.array([_cube_cell(u[0], u[1], u[2], n) for u in U])
+    cells = np.array([cube_cell(u[0], u[1], u[2], n) for u in U])
     assert np.all(reach <= bound[cells])
     assert np.all(bound[cells] - reach < 0.01)  # a useful bound: within 1 cm on a 4 cm part
     psi = roll_angles_rad(16)
@@ -227,7 +228,8 @@ def test_hull_support_bounds_the_points_and_settles_rolls_exactly():
         m = pts.min(0) + rng.random(3) * np.ptp(pts, axis=0)
         F = np.concatenate([m, x, y, z])
         thr = rng.uniform(0.0, 0.03)
-        got = int(_hull_free(F, hull, full, cos_k, sin_k, thr))
+        rolls = Rolls(cos_k, sin_k, 8, 0.0, full, 0.9)
+        got = int(hull_free(F, hull._replace(threshold=thr), full, rolls))
         for k in range(16):
             u = sin_k[k] * y - cos_k[k] * z  # -Z at roll k
             free = ((pts - m) @ u).max() < thr
@@ -238,9 +240,9 @@ def test_hull_support_bounds_the_points_and_settles_rolls_exactly():
 
 @pytest.mark.parametrize("points", [np.random.default_rng(0).random((50, 3)) * [1, 1, 0], np.eye(3)])
 def test_hull_of_flat_or_tiny_samples_certifies_nothing(points):
-    from graspgen.collision import _hull
+    from graspgen.collision._hull import build_hull
 
-    assert len(_hull(points)[0]) == 0
+    assert len(build_hull(points, 0.0).vertices) == 0
 
 
 @pytest.mark.parametrize("rolls", [1, 5, 64])
@@ -428,8 +430,7 @@ def test_mesh_free_rolls_of_pairs_equals_mesh_free_rolls_on_numpys_geometry(mode
     """The mesh-exact check's pipeline entry point (point index pairs; the kernel derives the geometry) gives the
     very masks of mesh_free_rolls on midpoints, axes and widths made by numpy (outside and inside grasps, the
     approach region, every roll and random subsets to test)."""
-    from graspgen.collision import approach_reach
-    from graspgen.meshtree import build_tree, mesh_free_rolls, mesh_free_rolls_of_pairs
+    from graspgen.collision import approach_reach, build_tree, mesh_free_rolls, mesh_free_rolls_of_pairs
 
     mesh = _parts()["ring"]
     pts, nrm = _sample(mesh, 1500)
@@ -462,7 +463,7 @@ def test_mesh_free_rolls_of_pairs_equals_mesh_free_rolls_on_numpys_geometry(mode
 @pytest.mark.parametrize("rolls", [8, 12, 16, 64])
 def test_any_free_rows_equal_numpy(rolls):
     """The pipeline's row test (8-byte words OR-ed as integers where the rows allow it) against ndarray.any."""
-    from graspgen.pipeline import _any_free
+    from graspgen.collision import any_free as _any_free
 
     rng = np.random.default_rng(rolls)
     free = rng.random((5000, rolls)) < 0.02  # many rows without a free roll, some with one anywhere in the row
@@ -532,25 +533,27 @@ def _mesh_free_rolls_brute(tree, mids, axes, widths, inside, model, rolls):
     own arithmetic (the roll-0 frame, the rotation per roll, the separating-axis test)."""
     from numba import njit
 
-    from graspgen.collision import _basis, _regions, _x_range_constants, _x_ranges
-    from graspgen.meshtree import _region_boxes, _tri_box
+    from graspgen.collision._frame import roll0_basis
+    from graspgen.collision._regions import finger_x_ranges, fixed_x_ranges, region_table
+    from graspgen.collision._triangles import region_boxes, tri_box
     from graspgen.transforms import ROLL_REFERENCE_SWITCH
 
     @njit(cache=False)
-    def brute(M, A, Wd, ins, T, reg, model_f, cos_k, sin_k, switch, out):
+    def brute(M, A, Wd, ins, T, regions, cos_k, sin_k, switch, out):
         R = cos_k.shape[0]
-        xr = np.empty((3, 2))
-        rx = np.empty((3, 2))
-        boxes_c = np.empty((3, 3))
-        boxes_e = np.empty((3, 3))
+        nr = regions.rows.shape[0]
+        rx = np.empty((nr, 2))
+        boxes_c = np.empty((nr, 3))
+        boxes_e = np.empty((nr, 3))
         v = np.empty((3, 3))
         w = np.empty((3, 3))
+        fixed_x_ranges(rx, regions)
         for i in range(M.shape[0]):
             ax, ay, az = A[i, 0], A[i, 1], A[i, 2]
-            yx, yy, yz, zx, zy, zz = _basis(ax, ay, az, switch)
-            _x_ranges(xr, ins[i], Wd[i], model_f)
-            _region_boxes(xr, reg, rx, boxes_c, boxes_e)
-            for r in range(reg.shape[0]):
+            yx, yy, yz, zx, zy, zz = roll0_basis(ax, ay, az, switch)
+            finger_x_ranges(rx, ins[i], Wd[i], regions)
+            region_boxes(regions, rx, boxes_c, boxes_e)
+            for r in range(nr):
                 bc, be = boxes_c[r], boxes_e[r]
                 for t in range(T.shape[0]):
                     for c in range(3):
@@ -564,7 +567,7 @@ def _mesh_free_rolls_brute(tree, mids, axes, widths, inside, model, rolls):
                             w[c, 0] = v[c, 0]
                             w[c, 1] = v[c, 1] * ck + v[c, 2] * sk
                             w[c, 2] = -v[c, 1] * sk + v[c, 2] * ck
-                        if _tri_box(w, bc, be):
+                        if tri_box(w, bc, be):
                             out[i, rl] = False
 
     out = np.ones((len(mids), rolls), dtype=bool)
@@ -575,8 +578,7 @@ def _mesh_free_rolls_brute(tree, mids, axes, widths, inside, model, rolls):
         widths,
         inside,
         tree.triangles,
-        _regions(model),
-        _x_range_constants(model),
+        region_table(model),
         np.cos(psi),
         np.sin(psi),
         ROLL_REFERENCE_SWITCH,
@@ -586,10 +588,11 @@ def _mesh_free_rolls_brute(tree, mids, axes, widths, inside, model, rolls):
 
 
 def test_mesh_tree_lists_each_small_nodes_distinct_vertices():
-    """The exact range along the axis (meshtree._walk) reads a node's distinct vertices: for every node of at most
+    """The exact range along the axis (the triangle walk) reads a node's distinct vertices: for every node of at most
     _EXACT_TRIANGLES triangles exactly the corners of its triangles, once each, and nothing for larger nodes (also
     with degenerate triangles dropped from the tree, which shift the faces' indices)."""
-    from graspgen.meshtree import _EXACT_TRIANGLES, build_tree
+    from graspgen.collision import build_tree
+    from graspgen.collision._triangles import EXACT_TRIANGLES as _EXACT_TRIANGLES
 
     ring = _parts()["ring"]
     faces = np.vstack([ring.faces, [[0, 0, 1], [2, 2, 2]]])  # two degenerate triangles, dropped by the tree
@@ -616,8 +619,7 @@ def test_mesh_free_rolls_equal_brute_force(name):
     """The mesh-exact check's tree walk (its node tests and their cuts only prune) gives what testing every
     triangle at every roll gives, with and without the approach region, outside and inside grasps, with every
     roll to test and with random subsets."""
-    from graspgen.collision import approach_reach
-    from graspgen.meshtree import build_tree, mesh_free_rolls
+    from graspgen.collision import approach_reach, build_tree, mesh_free_rolls
 
     mesh = _parts()[name]
     pts, nrm = _sample(mesh, 700, seed=3)

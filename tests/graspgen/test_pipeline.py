@@ -290,7 +290,7 @@ def test_every_exported_grasp_satisfies_all_criteria(part, friction, safety, rol
         expect = ref.free_rolls(
             sample.points, c.midpoints[m], c.axes[m], c.widths[m], c.inside[m], gs.gripper, mode, rolls
         )
-        # the mesh-exact check (meshtree.py) may only take rolls away from the point test's
+        # the mesh-exact check (graspgen.collision) may only take rolls away from the point test's
         assert not np.any(c.free_rolls[m] & ~expect)
         assert c.free_rolls[m].any(axis=1).all()
     assert gs.stats["candidates"] == len(gs.candidates)

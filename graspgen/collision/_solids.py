@@ -1,0 +1,149 @@
+"""The gripper's solids in the grasp frame (CONTRACT.md "Gripper spec"), read from one source, the GripperSpec.
+
+Criterion (d), the mesh-exact check, the pick query's plane test, previews, recordings and the physics validation
+all take the gripper's geometry from here. Frames:
+
+- finger frame: origin at the pad's contact point, the pad's inner face looking along -X (towards the part), +Z the
+  approach direction. At closing width w the +X finger's frame sits at (+w/2, 0, 0) of the grasp frame; the -X
+  finger's at (-w/2, 0, 0), turned 180 degrees about Z ((x, y, z) -> (-x, -y, z)).
+- grasp frame: the contract's (origin at the contacts' midpoint, X the closing axis, the palm at -Z).
+
+A box finger is the cuboid x in [0, finger_thickness], |y| <= finger_width / 2, |z| <= finger_depth / 2 of its
+finger frame; the palm is a box of the grasp frame behind the fingers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+__all__ = ["Box", "Cuboid", "GripperSolids", "BoxGripper"]
+
+Vec3 = tuple[float, float, float]
+
+
+class BoxGripper(Protocol):
+    """What the solids read of a gripper spec (graspgen.gripper.GripperSpec; read by attribute, because gripper.py
+    builds its boxes from this package)."""
+
+    stroke: float
+    min_width: float
+    finger_width: float
+    finger_depth: float
+    finger_thickness: float
+    palm_depth: float
+    palm_width: float | None
+    pregrasp_clearance: float
+
+
+@dataclass(frozen=True)
+class Box:
+    """An axis-aligned box in the grasp frame: centre (3,) and full extents (3,), metres."""
+
+    center: Vec3
+    extents: Vec3
+
+
+@dataclass(frozen=True)
+class Cuboid:
+    """An axis-aligned box given by its bounds lo <= hi (3 floats each), metres, in the frame its owner names."""
+
+    lo: Vec3
+    hi: Vec3
+
+
+@dataclass(frozen=True)
+class GripperSolids:
+    """The solids of a parallel-jaw gripper: the +X finger in its finger frame (the -X finger is its mirror image,
+    turned 180 degrees about Z), the palm in the grasp frame (None: no palm), and the travel of the fingers."""
+
+    finger: Cuboid
+    palm: Box | None
+    stroke: float
+    min_width: float
+    #: total extra opening before closing: the pre-grasp opening is min(width + clearance, stroke)
+    clearance: float
+    #: the palm's extent along Y (the approach region is at least this wide)
+    palm_width: float
+
+    @classmethod
+    def of(cls, spec: BoxGripper) -> GripperSolids:
+        t, fw, fd = spec.finger_thickness, spec.finger_width, spec.finger_depth
+        finger = Cuboid((0.0, -fw / 2, -fd / 2), (t, fw / 2, fd / 2))
+        palm = None
+        if spec.palm_depth > 0:
+            half_x = spec.stroke / 2 + t
+            z_top = -fd / 2
+            palm = Box((0.0, 0.0, z_top - spec.palm_depth / 2), (2 * half_x, float(spec.palm_width), spec.palm_depth))
+        return cls(finger, palm, spec.stroke, spec.min_width, spec.pregrasp_clearance, float(spec.palm_width))
+
+    @property
+    def finger_thickness(self) -> float:
+        """The finger's extent along X, from its pad's plane outwards."""
+        return self.finger.hi[0]
+
+    @property
+    def finger_base_z(self) -> float:
+        """The fingers' base: their lowest z (the palm's front face when there is a palm), grasp frame."""
+        return self.finger.lo[2]
+
+    def open_width(self, width, *, inside: bool = False):
+        """The pre-grasp opening for the contact distance `width` (float or array): min(width + clearance, stroke);
+        for an inside grasp (the fingers open outwards onto the part) the narrower max(width - clearance, min_width
+        + 2 thickness), the fingers' outer faces then."""
+        if inside:
+            floor = self.min_width + 2 * self.finger_thickness
+            return (
+                np.maximum(width - self.clearance, floor)
+                if isinstance(width, np.ndarray)
+                else max(width - self.clearance, floor)
+            )
+        return (
+            np.minimum(width + self.clearance, self.stroke)
+            if isinstance(width, np.ndarray)
+            else min(width + self.clearance, self.stroke)
+        )
+
+    def fingers(self, width: float) -> tuple[Box, Box]:
+        """The -X and +X finger boxes in the grasp frame at closing width `width` (inner faces at x = -+width/2)."""
+        lo, hi = self.finger.lo, self.finger.hi
+        cx = width / 2 + (lo[0] + hi[0]) / 2
+        cy, cz = (lo[1] + hi[1]) / 2, (lo[2] + hi[2]) / 2
+        ext = (hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2])
+        return Box((-cx, 0.0 - cy, cz), ext), Box((cx, cy, cz), ext)
+
+    def boxes(self, width: float) -> list[Box]:
+        """Every box of the gripper at closing width `width`: both fingers, then the palm when there is one."""
+        return [*self.fingers(width), *([self.palm] if self.palm else [])]
+
+    def approach(self, reach: float) -> Cuboid | None:
+        """Where the gripper passes on its way in along +Z, grasp frame: the palm, and (reach > 0) the palm's
+        footprint, at least a finger wide, swept back along -Z from the fingers' base `reach` behind it. None
+        without a palm and without a reach."""
+        depth = self.palm.extents[2] if self.palm is not None else 0.0
+        if depth <= 0 and reach <= 0:
+            return None
+        z_hi = self.finger_base_z
+        half_x = self.stroke / 2 + self.finger_thickness
+        half_y = self.palm_width / 2 if depth > 0 else 0.0
+        if reach > 0:  # the open fingers and the body behind them pass here too
+            half_y = max(half_y, self.finger.hi[1])
+        z_lo = z_hi - max(depth, float(reach))
+        return Cuboid((-half_x, -half_y, z_lo), (half_x, half_y, z_hi))
+
+    def plane_offsets(self, mx: np.ndarray, my: np.ndarray, mz: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """For a direction m of the grasp frame given per candidate as mx = |m . X|, my = |m . Y|, mz = m . Z (each
+        (k,)): (side, palm). side: how far below a finger's centre line its lowest corner lies, |mx| aside (that
+        part depends on the opening: a finger reaches |mx| (opening / 2 + thickness) along X); palm: the height of
+        the palm's lowest corner above the grasp origin (None without a palm). A box's lowest corner lies
+        sum_i |m_i| h_i below its centre (h: its half extents)."""
+        amz = np.abs(mz)
+        lo, hi = self.finger.lo, self.finger.hi
+        side = my * ((hi[1] - lo[1]) / 2) + amz * ((hi[2] - lo[2]) / 2)
+        palm = None
+        if self.palm is not None:
+            c, e = self.palm.center, self.palm.extents
+            palm = mz * c[2] - mx * (e[0] / 2) - my * (e[1] / 2) - amz * (e[2] / 2)
+        return side, palm
