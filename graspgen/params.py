@@ -130,7 +130,7 @@ class Params:
 
 #: members of its final cluster tried, nearest first, in place of an exported grasp that fails validation. Only
 #: failing grasps cost more: a round simulates the next member of each, together, so a set that mostly fails pays
-#: up to this many rounds (on bench_hold's parts 8 mends all but one failing cluster, docs/benchmarks_quality.md)
+#: up to this many rounds. With 8 every validated export of bench_hold's parts holds (docs/benchmarks_quality.md)
 REPAIR_LIMIT = 8
 
 
