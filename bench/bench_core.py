@@ -5,8 +5,8 @@
     .venv/bin/python bench/bench_core.py --kernels-only   # only the kernel tables (criteria (a)-(d)), see below
     .venv/bin/python bench/bench_core.py --kernels-only --no-scaling --repeat 3   # 10,000 points, median of 3
     .venv/bin/python bench/bench_core.py --scaling-only   # the pipeline at 10,000, 30,000 and 100,000 points
-    git show 03a6016:graspgen/collision.py > /tmp/collision_03a6016.py
-    .venv/bin/python bench/bench_core.py --kernels-only --baseline /tmp/collision_03a6016.py   # before/after
+    git show <commit>:graspgen/collision.py > /tmp/collision_base.py
+    .venv/bin/python bench/bench_core.py --kernels-only --baseline /tmp/collision_base.py   # that kernel beside this
 
 Each measurement runs in its own process (peak memory = that process's ru_maxrss), warm: the process first runs the
 pipeline once on a small part so numba's compiled code is loaded. Prints Markdown tables.
@@ -340,7 +340,7 @@ def _kernel_tables(quick: bool, baseline: str | None = None, no_scaling: bool = 
 
 def _machine() -> str:
     """Cores, load and the CPU as numba's compiler sees it: kernel times are only comparable between runs on the same
-    CPU (one session's host was 1.7-1.9x slower on the collision kernel than another's at the same core count)."""
+    CPU (two 2-core hosts of this project differed 1.7-1.9x on the collision kernel)."""
     import llvmlite.binding as llvm
 
     llvm.initialize_native_target()

@@ -59,12 +59,12 @@ EXACT_LIMIT = 4000
 DRAWS = 5
 MAX_ITER = 100
 #: two_stage()'s second stage (the axis clusters within each translation cluster) goes to sampling above this many
-#: members: on tless_04's 79,196 candidates 2000 instead of 4000 took stage two from 7.1 to 2.75 s of CPU for a
-#: direction loss 0.03 % higher (bench/bench_clustering.py)
+#: members: on tless_04's 79,196 candidates that costs 0.4 of the exact stage's CPU time for a direction loss
+#: 0.03 % higher (bench/bench_clustering.py)
 STAGE_TWO_EXACT_LIMIT = 2000
 #: ... and samples this many members per draw (kmedoids() defaults to 1000 + 50 k): directions on a sphere need few
-#: samples. On the 10,000-point cylinder's 717,357 candidates (16 clusters of 20-73 k members, k2 = 4) 600 instead
-#: of 1200 took stage two from 2.25 to 0.61 s of CPU for a direction loss 0.12 % higher
+#: samples. On the 10,000-point cylinder's 717,357 candidates (16 clusters of 20-73 k members, k2 = 4) stage two
+#: takes 0.61 s of CPU, a quarter of what twice the sample costs, for a direction loss 0.12 % higher
 STAGE_TWO_SAMPLE = 600
 
 #: the default CLARA sample, 1000 + 50 k, stops growing here (unless 2 k is larger) ...

@@ -61,10 +61,9 @@ class HoldModel:
     #: torsion radius of a point contact on a pad (a Hertz-like spot of about 1.5 mm)
     min_torsion_radius: float = 0.5e-3
     #: load directions on the quarter sphere (then refined around the worst): 28 there are as dense as 56 on the
-    #: half sphere. Measured on the thick ring's 400,000 candidates against 2,048 directions: at most 0.35 % above,
-    #: 0.09 % at the 99th percentile, kernel 0.34 s; 32 on the half sphere with three refinements before: 0.61 %,
-    #: 0.05 %, 0.48 s (the largest errors are basins the lattice misses, which a third round does not mend;
-    #: bench/bench_hold_margin.py)
+    #: half sphere. With 2 refinements the margin lies at most 0.35 % above a 2,048-direction search (0.09 % at
+    #: the 99th percentile) on the thick ring's candidates; the largest errors are basins the lattice misses, which
+    #: more refinement rounds do not mend (bench/bench_hold_margin.py)
     directions: int = 28
     #: refinement rounds: 8 neighbours of the worst direction at 1/2, then 1/4 ... of the lattice spacing
     refinements: int = 2
@@ -325,12 +324,10 @@ def _coeffs(dx, dy, dz, rx, ry, rz, inv_h, w_cap0, w_cap1, W):
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _lower(a0, a1, b, c0, c1, inv_c):
-    """A lower bound of the direction's limit scale: sqrt(1 - u^2) >= 1 - u makes the slack linear in s. Tried
-    on the ring's 400,025 candidates (per candidate 28 limits pass this bound, 25 of them end at one slack
-    evaluation, 3 need a root, about 8 steps each): the tighter 1 - u^2 (a quadratic in s, solved) instead, 1.04x
-    the time and margins that move in the last bits (the root finding starts elsewhere); as a second bound only to
-    skip directions, the same margins at 1.09x; a test of 1 - u^2 at the bracket's top before _slack there, the
-    same margins at 1.01x."""
+    """A lower bound of the direction's limit scale: sqrt(1 - u^2) >= 1 - u makes the slack linear in s, so the
+    bound costs no square root. A direction whose bound is not below the running best ends there; for the others
+    it is the held end of _limit's bracket, so the margins' last bits depend on it (and so does the first direction
+    _margin_one solves, the one with the lowest bound)."""
     top = max(a0, a1, (c0 * a0 + c1 * a1 + b) * inv_c)
     return np.inf if top <= 0.0 else 1.0 / top
 
@@ -410,8 +407,7 @@ def _margin_one(P, Nrm, ia, ib, rho, com, dirs, co, ring_c, ring_s, steps, refin
     lattice spacing, atan(mu) and its tangent (the same for every candidate).
 
     The coefficients of all directions (the lattice's, then each refinement's 8) come first in a loop without
-    branches, which the compiler vectorises; the limit scales follow in order. Same margins, bit for bit, as one
-    loop doing both, at 0.85-0.9x the time (the thick ring's 400,025 candidates: 0.30 -> 0.26-0.27 s)."""
+    branches, which the compiler vectorises; the limit scales follow in order (the root finding branches)."""
     W, cap, w_cap, max_margin, floor, spacing, phi, tan_phi = run
     K = dirs.shape[1]
     ax = P[ib, 0] - P[ia, 0]

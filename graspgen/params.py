@@ -133,10 +133,9 @@ class Params:
         return d
 
 
-#: members of its final cluster tried, nearest first, in place of an exported grasp that fails validation. Measured
-#: with bench_hold's parts (5,000 points, k = 8 x 2, 0.2 kg, 20 N): at 4 the pepper kept 2 of 16 clusters with no
-#: member that held, at 8 one, at 16 none (tless_10's and tless_13's failing clusters have no member that holds at
-#: any limit). Only failing grasps cost more: a round simulates the next member of each, together
+#: members of its final cluster tried, nearest first, in place of an exported grasp that fails validation. Only
+#: failing grasps cost more: a round simulates the next member of each, together, so a set that mostly fails pays
+#: up to this many rounds. With 8 every validated export of bench_hold's parts holds (docs/benchmarks_quality.md)
 REPAIR_LIMIT = 8
 
 

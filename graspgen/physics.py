@@ -133,7 +133,7 @@ class SimConstants:
     #: a convex piece reaching deeper than this into the palm at the grasp, before the fingers close, is the
     #: decomposition's slack (the exported grasp's palm is clear of the part's own triangles): the grasp runs on
     #: without the palm. MuJoCo resolves any such penetration at once: 0.58 mm flung a tless_13 part 2.8 mm and
-    #: 3.7 degrees before either finger touched it (docs/benchmarks_quality.md, sixth session)
+    #: 3.7 degrees before either finger touched it (tests/graspgen/test_physics.py checks a 0.5 mm piece)
     palm_start_tolerance: float = 0.05e-3
     #: samples of the part's surface that confirm an approach collision with a convex piece (about 0.2 mm apart on
     #: a 100 cm^2 part)
@@ -491,8 +491,8 @@ def _decompose_once(mesh: trimesh.Trimesh, c: SimConstants, seed: int) -> tuple[
 
     try:
         # CoACD's preprocessing remeshes the part (a manifold rebuild at `preprocess_resolution`); a closed mesh does
-        # not need it, and it moved tless_10's surface up to 1.5 mm outwards, where the pads then bore on pieces
-        # that stand proud of the part (its two 55.3 mm grasps slipped in every simulation and held without it)
+        # not need it, and the rebuild can move the surface outwards (up to 1.5 mm on tless_10), so that the pads
+        # bear on pieces standing proud of the part
         closed = mesh.is_watertight and mesh.is_winding_consistent
         try:
             parts = run("off" if closed else "auto")

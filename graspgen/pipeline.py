@@ -28,8 +28,8 @@ __all__ = ["generate", "recluster", "STAGES", "MAX_CANDIDATES", "choose_roll"]
 #: the stages reported to progress callbacks, in order ("validate" only with validate=True)
 STAGES = ("load", "sample", "pairs", "collision", "cluster", "validate", "export")
 #: the collision stage reports progress (and so sees a cancel) after its first tenth of the pairs, then about every
-#: _COLLISION_REPORT_S seconds. Each report ends a call of the parallel kernel (its threads wait for the slowest):
-#: a report per tenth made ten calls of a short stage and left a cancel waiting a tenth of a long one
+#: _COLLISION_REPORT_S seconds. Each report ends a call of the parallel kernel (its threads wait for the slowest),
+#: so reports are spaced by time: a short stage makes few calls, and a cancel waits about that long in a long one
 _COLLISION_BATCHES = 10
 _COLLISION_REPORT_S = 0.5
 _MIN_SEGMENT = 4096
@@ -206,8 +206,7 @@ class _Survivors:
 
     def keep(self, mask: np.ndarray, free: np.ndarray | None = None) -> _Survivors:
         """The pairs where `mask` holds (with the free rolls `free` instead of their own when given)."""
-        # the indices once, then a gather per array: a boolean mask per array finds them again each time (ring,
-        # 1.1 M pairs: 14 -> 4.5 ms)
+        # the indices once, then a gather per array: a boolean mask per array would search the mask again each time
         idx = np.flatnonzero(mask)
         margin = self.hold_margin.take(idx) if self.hold_margin is not None else None
         rolls = self.free if free is None else free

@@ -123,8 +123,9 @@ def _serve(args: argparse.Namespace) -> int:
     )
     _metrics_server(settings, app.state.dispatcher if workers == 1 else None)
     if workers > 1:
-        # each process builds its own app from the same environment; importing it (numba, trimesh, mujoco) took 9 s
-        # on a busy 2-core host, past uvicorn's 5 s start-up health check, which then killed the children in a loop
+        # each process builds its own app from the same environment; importing it (numba, trimesh, mujoco) can take
+        # 9 s on a busy 2-core host, past uvicorn's default 5 s start-up health check, which would kill the children
+        # in a loop
         options["timeout_worker_healthcheck"] = 120
         uvicorn.run("services.cli:app_factory", factory=True, workers=workers, **options)
     else:

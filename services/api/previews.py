@@ -1,8 +1,8 @@
 """preview.png rendering off the request path: a small pool of render processes, a bounded wait, a PNG cache.
 
 Why processes: a render is seconds of numpy and numba work on large arrays. In the API's own threads it would hold the
-GIL against every other request and (before this module) a database connection for its whole duration; four clients
-asking for large previews stalled catalogue lookups for 30 s. Here:
+GIL against every other request (and, drawn inside the request's session, a database connection for its whole
+duration): four clients asking for large previews would stall catalogue lookups for tens of seconds. Here:
 
 * the route reads what it needs from the database in a short session and closes it before anything is drawn;
 * renders run in `preview_workers` spawned processes at a lower CPU priority (nice 10), so lookups win the CPU;

@@ -61,8 +61,8 @@ def test_a_real_job_longer_than_the_limit_fails_and_the_worker_goes_on(stack, wo
     it; if the signal lands inside a long kernel, the hard limit does. Either way: `time-limit`, and the next job.
 
     40,000 points: 24 s of work in a warm process on a quiet 2-core host (3.6 M candidates; an estimated peak of
-    2 GB, within the worker's memory budget), three times the soft limit. 20,000 points took 6.3 s once the
-    mesh-exact check got faster (2026-12-04), and the job then finished inside the limit."""
+    2 GB, within the worker's memory budget), three times the soft limit. 20,000 points (6.3 s) would finish
+    inside the limit."""
     obj, grip = stack.pair(cylinder_stl(radius_mm=15.0))
     jid = stack.submit(obj, grip, {"points": 40000, "seed": 2})
     job = stack.svc.wait_job(jid, timeout=90)
