@@ -15,11 +15,11 @@ import traceback
 import uuid
 from dataclasses import fields
 from pathlib import Path
-from typing import Any, get_args, get_type_hints
+from typing import Any
 
 from .errors import Cancelled, GraspgenError, InvalidUnitsError
 from .examples import EXAMPLE_GRIPPER
-from .params import Params, QualityOptions
+from .params import Params, QualityOptions, param_options
 from .units import UNIT_SCALE
 
 __all__ = ["main", "DEMO_GRIPPER"]
@@ -37,38 +37,40 @@ class _Parser(argparse.ArgumentParser):
         raise _UsageError(message)
 
 
-def _add_run_options(p: argparse.ArgumentParser) -> None:
-    """Every field of Params and the job options of QualityOptions, as their types and metadata describe them."""
-    hints = {**get_type_hints(Params), **get_type_hints(QualityOptions)}
-    quality = [f for f in fields(QualityOptions) if f.name in QualityOptions.JOB_OPTIONS]
+def _add_run_options(
+    p: argparse.ArgumentParser, params_cls: type[Params] = Params, options_cls: type[QualityOptions] = QualityOptions
+) -> None:
+    """Every run parameter of Params and the job options of QualityOptions, as their types and metadata declare them
+    (params.py `_option`): a new field of Params is a new option here."""
+    quality = [o for o in param_options(options_cls) if o.name in options_cls.JOB_OPTIONS]
     groups: dict[str, Any] = {}  # mutually exclusive groups by name
-    for f in (*fields(Params), *quality):
-        meta = f.metadata
-        flag = meta["flag"] or "--" + f.name.replace("_", "-")
+    for o in (*param_options(params_cls), *quality):
+        flag = o.flag or "--" + o.name.replace("_", "-")
         target = p
-        if meta["exclusive"]:
-            if meta["exclusive"] not in groups:
-                groups[meta["exclusive"]] = p.add_mutually_exclusive_group()
-            target = groups[meta["exclusive"]]
-        kind = hints[f.name]
-        if kind is bool:
-            target.add_argument(flag, dest=f.name, action="store_true", help=meta["help"])
+        if o.exclusive:
+            if o.exclusive not in groups:
+                groups[o.exclusive] = p.add_mutually_exclusive_group()
+            target = groups[o.exclusive]
+        if o.kind is bool:
+            target.add_argument(flag, dest=o.name, action="store_true", help=o.help)
             continue
-        # `float | None` -> float: None is the default, never typed on the command line
-        scalar = next(t for t in get_args(kind) or (kind,) if t is not type(None))
-        shown = "" if f.default is None else " (default %(default)s)"
+        # `float | None`: None is the default, never typed on the command line
+        shown = "" if o.default is None else " (default %(default)s)"
         target.add_argument(
             flag,
-            dest=f.name,
-            type=scalar,
-            choices=meta["choices"],
-            default=f.default,
-            metavar=None if meta["choices"] else flag[2:].replace("-", "_").upper(),
-            help=meta["help"] + shown,
+            dest=o.name,
+            type=o.kind,
+            choices=o.choices,
+            default=o.default,
+            metavar=None if o.choices else flag[2:].replace("-", "_").upper(),
+            help=o.help + shown,
         )
 
 
-def _parser() -> argparse.ArgumentParser:
+def _parser(
+    params_cls: type[Params] = Params, options_cls: type[QualityOptions] = QualityOptions
+) -> argparse.ArgumentParser:
+    """The command line; its run options are the fields of `params_cls` and `options_cls` (_add_run_options)."""
     parser = _Parser(prog="graspgen", description="Grasp poses for parallel-jaw grippers (CONTRACT.md).")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     g = sub.add_parser("generate", help="grasps for one part and gripper")
@@ -76,7 +78,7 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("--units", choices=tuple(UNIT_SCALE), help="the length unit of the file (required)")
     g.add_argument("--gripper", required=True, help="gripper spec JSON (metres)")
     g.add_argument("--name", help="object name in the export (default: the file stem)")
-    _add_run_options(g)
+    _add_run_options(g, params_cls, options_cls)
     g.add_argument("--out", required=True, help="grasp_set/1 JSON to write")
     g.add_argument("--candidates", help="candidate NPZ to write")
     g.add_argument("--recording", help="Rerun .rrd to write")
@@ -84,7 +86,7 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("--quiet", action="store_true", help="no summary table")
     d = sub.add_parser("demo", help="grasps for a shipped example part, written to out/demo/")
     d.add_argument("--part", default="ring-screw", help="example part (default ring-screw)")
-    _add_run_options(d)
+    _add_run_options(d, params_cls, options_cls)
     d.add_argument("--out-dir", default="out/demo")
     r = sub.add_parser("render", help="PNG picture of a grasp set on its part")
     r.add_argument("grasps", help="grasp_set/1 JSON")
@@ -152,12 +154,21 @@ def main(argv: list[str] | None = None) -> int:
         return 1
 
 
-def _run_kwargs(args: argparse.Namespace) -> dict[str, Any]:
-    return {f.name: getattr(args, f.name) for f in fields(Params)}
+def _run_kwargs(args: argparse.Namespace, params_cls: type[Params] = Params) -> dict[str, Any]:
+    """The parsed run parameters by field name (Params(**these))."""
+    return {f.name: getattr(args, f.name) for f in fields(params_cls)}
 
 
-def _quality_kwargs(args: argparse.Namespace) -> dict[str, Any]:
-    return {k: getattr(args, k) for k in QualityOptions.JOB_OPTIONS}
+def _quality_kwargs(args: argparse.Namespace, options_cls: type[QualityOptions] = QualityOptions) -> dict[str, Any]:
+    """The parsed job options by field name (QualityOptions(**these))."""
+    return {k: getattr(args, k) for k in options_cls.JOB_OPTIONS}
+
+
+def _run_params(
+    args: argparse.Namespace, params_cls: type[Params] = Params, options_cls: type[QualityOptions] = QualityOptions
+) -> tuple[Params, QualityOptions]:
+    """The parsed options as the run's Params and QualityOptions (InvalidParameterError: exit 2)."""
+    return params_cls(**_run_kwargs(args, params_cls)), options_cls(**_quality_kwargs(args, options_cls))
 
 
 def _preview_of(mesh_path: str, units: str):
@@ -214,8 +225,7 @@ def _generate(args: argparse.Namespace) -> int:
     from .units import extents_under_each_unit
 
     spec = GripperSpec.load(args.gripper)
-    Params(**_run_kwargs(args))  # validate before any heavy work
-    QualityOptions(**_quality_kwargs(args))
+    params, options = _run_params(args)  # checked before any heavy work
     if args.units is None:
         from .parts import read_raw_extents
 
@@ -237,8 +247,8 @@ def _generate(args: argparse.Namespace) -> int:
             recording=rec,
             progress=progress,
             object_name=args.name,
-            **_run_kwargs(args),
-            **_quality_kwargs(args),
+            params=params,
+            options=options,
         ),
         outputs,
         quiet=args.quiet,
@@ -260,13 +270,12 @@ def _demo(args: argparse.Namespace) -> int:
         f"gripper {DEMO_GRIPPER['name']!r}, {args.points} points",
         file=sys.stderr,
     )
-    code = _run_and_write(
-        lambda rec, progress: pipeline.generate(
-            part, DEMO_GRIPPER, recording=rec, progress=progress, **_run_kwargs(args), **_quality_kwargs(args)
-        ),
-        outputs,
-        quiet=False,
-    )
+
+    def run(rec: Any, progress: Any) -> Any:
+        params, options = _run_params(args)
+        return pipeline.generate(part, DEMO_GRIPPER, recording=rec, progress=progress, params=params, options=options)
+
+    code = _run_and_write(run, outputs, quiet=False)
     if code == 0:
         print(
             f"wrote {outputs['out']}, {outputs['candidates']} and {outputs['recording']} "

@@ -23,6 +23,7 @@ from typing import Any
 
 from .errors import InvalidParameterError
 from .gripper import GripperSpec
+from .params import Params, QualityOptions, from_keywords, param_option
 from .parts import Part
 
 __all__ = [
@@ -30,6 +31,8 @@ __all__ = [
     "MemoryEstimate",
     "MemoryLimitError",
     "probe",
+    "probe_params",
+    "DENSITY_FIELDS",
     "estimate_peak_bytes",
     "check_memory",
     "PROBE_POINTS",
@@ -56,7 +59,11 @@ _BLOCK_PAIRS = 4_000_000
 #: the probe's candidates per point squared are raised by this much: it can under-count by a few per cent
 CANDIDATE_MARGIN = 1.15
 #: the smallest and largest point counts Params accepts
-_MIN_POINTS, _MAX_POINTS = 100, 1_000_000
+_MIN_POINTS, _MAX_POINTS = int(param_option(Params, "points").ge), int(param_option(Params, "points").le)
+#: the Params fields that change the candidates per point squared; the probe runs with these and the defaults of
+#: the others (points, k1, k2 and seed do not change it; criterion (e) only removes candidates after the collision
+#: stage, so leaving it out over-estimates both phases)
+DENSITY_FIELDS = ("friction", "safety_factor", "rolls", "inside", "collision")
 
 
 class MemoryLimitError(InvalidParameterError):
@@ -111,7 +118,8 @@ class Probe:
         return MemoryEstimate(n, int(peak), candidates, pairs)
 
     def max_points(self, budget_bytes: int) -> int:
-        """The largest point count (a multiple of 100 from 100 to 1,000,000) whose estimate fits; 0 when none does."""
+        """The largest point count (a multiple of 100 within Params' range of points) whose estimate fits; 0 when none
+        does."""
         if self.estimate(_MIN_POINTS).peak_bytes > budget_bytes:
             return 0
         lo, hi = _MIN_POINTS // 100, _MAX_POINTS // 100  # in hundreds: the estimate grows with n
@@ -124,37 +132,30 @@ class Probe:
         return lo * 100
 
 
+def probe_params(params: Params) -> Params:
+    """The parameters a probe for a run with `params` runs with: PROBE_POINTS points, one cluster, seed 0, the
+    DENSITY_FIELDS of `params` and the defaults of the others. Two runs whose probe parameters are equal share a
+    probe (services/common/memory_guard.py keys its cache on them)."""
+    return Params(points=PROBE_POINTS, k1=1, k2=1, seed=0, **{k: getattr(params, k) for k in DENSITY_FIELDS})
+
+
 def probe(
     part: Part,
     gripper: GripperSpec | dict[str, Any],
-    *,
-    friction: float | None = None,
-    safety_factor: float = 1.5,
-    rolls: int = 16,
-    inside: bool = False,
-    collision: str = "swept",
-    **_: Any,
+    params: Params | None = None,
+    **run_params: Any,
 ) -> Probe:
     """Run the pipeline at PROBE_POINTS points of `part` and keep its candidate and pair counts per point squared.
 
-    Other keyword arguments (points, k1, k2, seed, quality options) do not change the density and are ignored.
+    `params` (or generate()'s run-parameter keywords: the fields of Params and QualityOptions) are the run's; only
+    their DENSITY_FIELDS change the probe (probe_params).
     """
     from .pipeline import generate
 
+    params, _ = from_keywords("probe", run_params, (Params, params), (QualityOptions, None))
+    run = probe_params(params)
     rss0 = _reset_peak()
-    gs = generate(
-        part,
-        gripper,
-        points=PROBE_POINTS,
-        friction=friction,
-        safety_factor=safety_factor,
-        rolls=rolls,
-        inside=inside,
-        collision=collision,
-        k1=1,
-        k2=1,
-        seed=0,
-    )
+    gs = generate(part, gripper, params=run)
     s = gs.stats
     m = max(int(s["points"]), 2)
     rej = s["rejected"]
@@ -164,7 +165,7 @@ def probe(
     pairs += int(s.get("exact", {}).get("friction_position_tolerance", 0))
     part_bytes = max(_status_bytes("VmHWM") - rss0, 0) if rss0 else 0
     # a point cloud with fewer points than asked gives m < PROBE_POINTS; scaling from it stays an over-estimate
-    return Probe(m, CANDIDATE_MARGIN * int(s["candidates"]) / (m * m), pairs / (m * m), int(rolls), int(part_bytes))
+    return Probe(m, CANDIDATE_MARGIN * int(s["candidates"]) / (m * m), pairs / (m * m), run.rolls, int(part_bytes))
 
 
 def _status_bytes(field: str) -> int:
@@ -215,7 +216,7 @@ def limit_error(pr: Probe, est: MemoryEstimate, budget_bytes: int) -> MemoryLimi
     advice = (
         f"at most {fit:,} points fit: use points <= {fit}"
         if fit
-        else "not even 100 points fit: raise the worker's memory budget"
+        else f"not even {_MIN_POINTS} points fit: raise the worker's memory budget"
     )
     return MemoryLimitError(
         f"{est.points:,} points would need about {est.peak_bytes / gib:.1f} GiB at the peak (about "

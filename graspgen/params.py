@@ -1,16 +1,26 @@
-"""Run parameters (CONTRACT.md `params`) and the named tolerances of the kernels."""
+"""Run parameters (CONTRACT.md `params`), each declared once as a field with its type, default, range, choices and
+help, and the named tolerances of the kernels."""
 
 from __future__ import annotations
 
+import functools
+import inspect
 import math
+import types
 from dataclasses import asdict, dataclass, field, fields
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Union, get_args, get_origin, get_type_hints
 
 from .errors import InvalidParameterError
 
 __all__ = [
     "Params",
     "QualityOptions",
+    "ParamOption",
+    "param_options",
+    "param_option",
+    "keyword_parameters",
+    "from_keywords",
+    "from_job",
     "Tolerances",
     "TOLERANCES",
     "COLLISION_MODES",
@@ -56,62 +66,115 @@ def _option(
     flag: str | None = None,
     choices: tuple[str, ...] | None = None,
     exclusive: str | None = None,
+    ge: float | None = None,
+    gt: float | None = None,
+    le: float | None = None,
 ) -> Any:
-    """A field that the command line offers (cli.py builds its options from these): `help` says what it is,
-    `flag` when the option is not named after the field, `choices` for a closed set, `exclusive` names a group of
-    options of which one at most may be given."""
-    return field(default=default, metadata={"help": help, "flag": flag, "choices": choices, "exclusive": exclusive})
+    """A run parameter, declared once: its type is the field's annotation (`T | None`: None is accepted and means the
+    default's rule), `help` says what it is, `flag` names the CLI option when it is not named after the field,
+    `choices` a closed set, `exclusive` a group of options of which one at most may be given, `ge` / `gt` and `le` its
+    range (closed or open below, closed above). `__post_init__` checks these; the CLI's options (cli.py), the job
+    params schema of the OpenAPI document (services/api/contract_schemas.py) and generate()'s keywords are built from
+    them."""
+    meta = {"help": help, "flag": flag, "choices": choices, "exclusive": exclusive, "ge": ge, "gt": gt, "le": le}
+    return field(default=default, metadata=meta)
+
+
+@dataclass(frozen=True)
+class ParamOption:
+    """One declared run parameter (a field made with `_option`) as the CLI, the API schema and validation read it."""
+
+    name: str
+    #: int, float, bool or str (the field's annotation without None)
+    kind: type
+    #: None is a value of the parameter (friction: the gripper's; mass_kg, density: not given)
+    optional: bool
+    default: Any
+    help: str
+    flag: str | None
+    choices: tuple[str, ...] | None
+    exclusive: str | None
+    ge: float | None
+    gt: float | None
+    le: float | None
+
+
+@functools.cache
+def param_options(cls: type) -> tuple[ParamOption, ...]:
+    """The declared run parameters of a Params or QualityOptions (or a subclass), in field order."""
+    hints = get_type_hints(cls)
+    out = []
+    for f in fields(cls):
+        if "help" not in f.metadata:
+            continue  # a Python-API-only field (QualityOptions.repair_limit, sim_workers), checked by its class
+        hint = hints[f.name]
+        members = get_args(hint) if get_origin(hint) in (Union, types.UnionType) else (hint,)
+        kinds = [t for t in members if t is not type(None)]
+        if len(kinds) != 1 or kinds[0] not in (int, float, bool, str):
+            raise TypeError(
+                f"{cls.__name__}.{f.name}: a run parameter is int, float, bool or str (or None), not {hint}"
+            )
+        m = f.metadata
+        out.append(
+            ParamOption(
+                name=f.name,
+                kind=kinds[0],
+                optional=len(kinds) < len(members),
+                default=f.default,
+                help=m["help"],
+                flag=m["flag"],
+                choices=m["choices"],
+                exclusive=m["exclusive"],
+                ge=m["ge"],
+                gt=m["gt"],
+                le=m["le"],
+            )
+        )
+    return tuple(out)
+
+
+def param_option(cls: type, name: str) -> ParamOption:
+    """The declared run parameter `name` of `cls` (KeyError when there is none)."""
+    for o in param_options(cls):
+        if o.name == name:
+            return o
+    raise KeyError(name)
 
 
 @dataclass(frozen=True)
 class Params:
-    """The run parameters (CONTRACT.md `params`), validated; the CLI's options are built from these fields."""
+    """The run parameters (CONTRACT.md `params`), validated. Each field is declared once (`_option`): the CLI's
+    options, the job params schema of the HTTP API, generate()'s keywords and the worker's run are built from them."""
 
-    points: int = _option(10_000, "target number of surface points")
-    friction: float | None = _option(None, "friction coefficient (default: the gripper's)")
-    safety_factor: float = _option(1.5, "friction cone divisor")
-    rolls: int = _option(16, "roll angles about the closing axis")
-    k1: int = _option(16, "translation clusters")
-    k2: int = _option(4, "direction clusters per translation cluster")
-    inside: bool = _option(False, "also inside grasps (fingers opening outwards)")
-    collision: str = _option("swept", "collision model", choices=COLLISION_MODES)
-    seed: int = _option(0, "seed of the sampling and the clustering")
+    points: int = _option(10_000, "target number of surface points", ge=100, le=1_000_000)
+    friction: float | None = _option(None, "friction coefficient (default: the gripper's)", gt=0, le=10)
+    safety_factor: float = _option(1.5, "friction cone half-angle divisor", ge=1, le=100)
+    # at most 64: one 64-bit roll mask per candidate
+    rolls: int = _option(16, "roll angles 2 pi k / rolls about the closing axis tested per pair", ge=1, le=64)
+    k1: int = _option(16, "translation clusters", ge=1, le=10_000)
+    k2: int = _option(4, "direction clusters per translation cluster", ge=1, le=1_000)
+    inside: bool = _option(False, "also inside grasps (bores: fingers opening outwards)")
+    collision: str = _option("swept", "collision model of criterion (d)", choices=COLLISION_MODES)
+    seed: int = _option(0, "seed of the sampling and the clustering", ge=0, le=2**32 - 1)
     # criterion (e) needs the part's mass: given, or its density times the mesh volume
     mass_kg: float | None = _option(
-        None, "the part's mass, kg (criterion (e) and --validate)", flag="--mass", exclusive="mass"
+        None, "the part's mass, kg (criterion (e) and validation)", flag="--mass", exclusive="mass", gt=0, le=100_000
     )
-    density: float | None = _option(None, "the part's density, kg/m^3 (mass = density x volume)", exclusive="mass")
+    density: float | None = _option(
+        None, "the part's density, kg/m^3 (mass = density x volume)", exclusive="mass", ge=1, le=100_000
+    )
     accel: float = _option(
-        STANDARD_GRAVITY, "acceleration beyond gravity a held part resists in every direction, m/s^2"
+        STANDARD_GRAVITY, "acceleration beyond gravity a held part resists in every direction, m/s^2", ge=0, le=1_000
     )
     hold: str = _option(
         "any", "criterion (e): any (needs the mass and the gripper's grip_force) or off", choices=HOLD_MODES
     )
     position_tolerance: float = _option(
-        1.0e-3, "criterion (c) holds for every surface normal within this distance of a contact, m"
+        1.0e-3, "criterion (c) holds for every surface normal within this distance of a contact, m", ge=0, le=0.05
     )
 
     def __post_init__(self) -> None:
-        _int(self, "points", 100, 1_000_000)
-        _int(self, "rolls", 1, 64)  # one 64-bit roll mask per candidate
-        _int(self, "k1", 1, 10_000)
-        _int(self, "k2", 1, 1_000)
-        _int(self, "seed", 0, 2**32 - 1)
-        if self.friction is not None:
-            _num(self, "friction", lo=0.0, lo_open=True, hi=10.0)
-        _num(self, "safety_factor", lo=1.0, hi=100.0)
-        if not isinstance(self.inside, bool):
-            raise InvalidParameterError(f"inside must be true or false, got {self.inside!r}", field="inside")
-        if self.mass_kg is not None:
-            _num(self, "mass_kg", lo=0.0, lo_open=True, hi=100_000.0)
-        if self.density is not None:
-            _num(self, "density", lo=1.0, hi=100_000.0)
-        if self.mass_kg is not None and self.density is not None:
-            raise InvalidParameterError("give mass_kg or density, not both", field="density")
-        _num(self, "accel", lo=0.0, hi=1_000.0)
-        _num(self, "position_tolerance", lo=0.0, hi=0.05)
-        _choice(self, "hold")
-        _choice(self, "collision")
+        _check_options(self)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any] | None) -> Params:
@@ -164,9 +227,7 @@ class QualityOptions:
     JOB_OPTIONS: ClassVar[tuple[str, ...]] = ("validate", "select")
 
     def __post_init__(self) -> None:
-        _choice(self, "select")
-        if not isinstance(self.validate, bool):
-            raise InvalidParameterError(f"validate must be true or false, got {self.validate!r}", field="validate")
+        _check_options(self)
         r = self.repair_limit
         if isinstance(r, bool) or not isinstance(r, int) or not 0 <= r <= 64:
             raise InvalidParameterError(f"repair_limit must be an integer 0..64, got {r!r}", field="repair_limit")
@@ -191,25 +252,95 @@ class QualityOptions:
         return {k: getattr(self, k) for k in self.JOB_OPTIONS if getattr(self, k) != getattr(QualityOptions, k)}
 
 
-def _int(p: Params, name: str, lo: int, hi: int) -> None:
-    v = getattr(p, name)
+def keyword_parameters(*classes: type) -> list[inspect.Parameter]:
+    """Keyword-only parameters, one per field of these dataclasses, with the field's annotation and default: the
+    run-parameter keywords of generate()'s signature."""
+    return [
+        inspect.Parameter(f.name, inspect.Parameter.KEYWORD_ONLY, default=f.default, annotation=f.type)
+        for cls in classes
+        for f in fields(cls)
+    ]
+
+
+def from_keywords(caller: str, given: dict[str, Any], *ready: tuple[type, Any]) -> list[Any]:
+    """For each (dataclass, ready instance or None): the ready instance, or the dataclass built from its fields among
+    the keyword arguments `given` (the others keep their defaults). A keyword that is no field of any of them, or
+    fields given beside a ready instance, is a TypeError naming `caller`, as Python says it of a keyword a function
+    does not take."""
+    known = {f.name: cls for cls, _ in ready for f in fields(cls)}
+    unknown = [k for k in given if k not in known]
+    if unknown:
+        raise TypeError(f"{caller}() got an unexpected keyword argument {unknown[0]!r}")
+    out = []
+    for cls, obj in ready:
+        mine = {k: v for k, v in given.items() if known[k] is cls}
+        if obj is not None and mine:
+            raise TypeError(
+                f"{caller}() takes a ready {cls.__name__} or its fields as keywords, not both: {', '.join(mine)}"
+            )
+        out.append(obj if obj is not None else cls(**mine))
+    return out
+
+
+def from_job(
+    stored: dict[str, Any] | None,
+    params_cls: type[Params] = Params,
+    options_cls: type[QualityOptions] = QualityOptions,
+) -> tuple[Params, QualityOptions]:
+    """A job's params dict (as the job service stores it: the Params fields and the job options) as Params and
+    QualityOptions; a parameter the dict lacks (a job stored before it existed) takes its default. Unknown names and
+    bad values raise InvalidParameterError."""
+    rest, options = options_cls.split_job(stored)
+    return params_cls.from_dict(rest), options
+
+
+def _check_options(obj: Params | QualityOptions) -> None:
+    """Every declared run parameter of `obj` against its type, choices and range; then the exclusive groups."""
+    groups: dict[str, list[str]] = {}
+    for o in param_options(type(obj)):
+        v = getattr(obj, o.name)
+        if v is None and o.optional:
+            continue
+        if o.exclusive:
+            groups.setdefault(o.exclusive, []).append(o.name)
+        if o.choices is not None:
+            if v not in o.choices:
+                raise InvalidParameterError(f"{o.name} must be one of {', '.join(o.choices)}, got {v!r}", field=o.name)
+        elif o.kind is bool:
+            if not isinstance(v, bool):
+                raise InvalidParameterError(f"{o.name} must be true or false, got {v!r}", field=o.name)
+        elif o.kind is int:
+            _int(o, v)
+        elif o.kind is float:
+            _num(o, v)
+        elif not isinstance(v, str):
+            raise InvalidParameterError(f"{o.name} must be a string, got {v!r}", field=o.name)
+    for names in groups.values():
+        if len(names) > 1:
+            raise InvalidParameterError(f"give {' or '.join(names)}, not both", field=names[-1])
+
+
+def _int(o: ParamOption, v: Any) -> None:
     if isinstance(v, bool) or not isinstance(v, int):
-        raise InvalidParameterError(f"{name} must be an integer, got {v!r}", field=name)
-    if not lo <= v <= hi:
-        raise InvalidParameterError(f"{name} must be between {lo} and {hi}, got {v}", field=name)
+        raise InvalidParameterError(f"{o.name} must be an integer, got {v!r}", field=o.name)
+    if not _in_range(o, v):
+        if o.ge is not None and o.le is not None:
+            raise InvalidParameterError(f"{o.name} must be between {o.ge} and {o.le}, got {v}", field=o.name)
+        raise InvalidParameterError(f"{o.name} must be {_range_text(o, int)}, got {v}", field=o.name)
 
 
-def _choice(p: Params | QualityOptions, name: str) -> None:
-    """One of the field's `choices` (its metadata)."""
-    v, choices = getattr(p, name), p.__dataclass_fields__[name].metadata["choices"]
-    if v not in choices:
-        raise InvalidParameterError(f"{name} must be one of {', '.join(choices)}, got {v!r}", field=name)
-
-
-def _num(p: Params, name: str, *, lo: float, hi: float, lo_open: bool = False) -> None:
-    v = getattr(p, name)
+def _num(o: ParamOption, v: Any) -> None:
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise InvalidParameterError(f"{name} must be a finite number, got {v!r}", field=name)
-    if (v <= lo if lo_open else v < lo) or v > hi:
-        op = ">" if lo_open else ">="
-        raise InvalidParameterError(f"{name} must be {op} {lo} and <= {hi}, got {v}", field=name)
+        raise InvalidParameterError(f"{o.name} must be a finite number, got {v!r}", field=o.name)
+    if not _in_range(o, v):
+        raise InvalidParameterError(f"{o.name} must be {_range_text(o, float)}, got {v}", field=o.name)
+
+
+def _in_range(o: ParamOption, v: float) -> bool:
+    return (o.ge is None or v >= o.ge) and (o.gt is None or v > o.gt) and (o.le is None or v <= o.le)
+
+
+def _range_text(o: ParamOption, kind: type) -> str:
+    """The bounds as the parameter's type shows them: '>= 1.0 and <= 100.0'."""
+    parts = [f"{op} {kind(b)}" for op, b in ((">=", o.ge), (">", o.gt), ("<=", o.le)) if b is not None]
+    return " and ".join(parts)

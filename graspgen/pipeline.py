@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import math
 import os
 import time
@@ -19,7 +20,7 @@ from .coverage import coverage
 from .errors import InvalidParameterError, InvalidUnitsError
 from .export import Candidates, GraspSet
 from .gripper import GripperSpec
-from .params import REPAIR_LIMIT, Params, QualityOptions
+from .params import Params, QualityOptions, from_keywords, keyword_parameters
 from .parts import Part, load_part
 from .transforms import grasp_frames, roll_angles_rad
 
@@ -47,35 +48,31 @@ def _noop(stage: str, fraction: float) -> None:
     return None
 
 
+def _signature_with_fields(func: Callable[..., Any], *classes: type) -> inspect.Signature:
+    """`func`'s signature with its `**keywords` replaced by one keyword per field of `classes`, with the field's
+    default: what inspect.signature and help() show of generate() and recluster() (params.py declares them once)."""
+    sig = inspect.signature(func)
+    own = [p for p in sig.parameters.values() if p.kind is not inspect.Parameter.VAR_KEYWORD]
+    return sig.replace(parameters=[*own, *keyword_parameters(*classes)])
+
+
 def generate(
     mesh_or_path: str | os.PathLike | trimesh.Trimesh | Part,
     gripper: GripperSpec | dict[str, Any],
     *,
     units: str | None = None,
-    points: int = 10_000,
-    friction: float | None = None,
-    safety_factor: float = 1.5,
-    rolls: int = 16,
-    k1: int = 16,
-    k2: int = 4,
-    inside: bool = False,
-    collision: str = "swept",
-    seed: int = 0,
     recording: Any = None,
     progress: Progress | None = None,
     object_name: str | None = None,
     object_version: int | None = None,
-    select: str = "medoid",
-    validate: bool = False,
-    mass_kg: float | None = None,
-    density: float | None = None,
-    accel: float = 9.81,
-    hold: str = "any",
-    position_tolerance: float = 0.001,
-    repair_limit: int = REPAIR_LIMIT,
-    sim_workers: int | None = None,
+    params: Params | None = None,
+    options: QualityOptions | None = None,
+    **run_params: Any,
 ) -> GraspSet:
     """Grasps for one part and one gripper (see CONTRACT.md, Python API).
+
+    The run parameters are the fields of `Params` and `QualityOptions` (params.py), each a keyword argument with the
+    field's default (the signature lists them), or given ready as `params=` / `options=` (not both ways at once).
 
     `recording` is a path for a Rerun .rrd or a `rerun.RecordingStream` to log into. `progress(stage, fraction)`
     is called within and between stages; raising `graspgen.errors.Cancelled` from it stops the run.
@@ -92,24 +89,8 @@ def generate(
     the mesh's triangles (graspgen.collision).
     """
     report = progress or _noop
-    options = QualityOptions(select=select, validate=validate, repair_limit=repair_limit, sim_workers=sim_workers)
+    params, options = from_keywords("generate", run_params, (Params, params), (QualityOptions, options))
     spec = gripper if isinstance(gripper, GripperSpec) else GripperSpec.from_dict(gripper)
-    params = Params(
-        points=points,
-        friction=friction,
-        safety_factor=safety_factor,
-        rolls=rolls,
-        k1=k1,
-        k2=k2,
-        inside=inside,
-        collision=collision,
-        seed=seed,
-        mass_kg=mass_kg,
-        density=density,
-        accel=accel,
-        hold=hold,
-        position_tolerance=position_tolerance,
-    )
     mu = spec.friction if params.friction is None else params.friction
     run = _Run(spec, params, options, mu, report, timings={}, started=time.perf_counter())
 
@@ -138,6 +119,8 @@ def generate(
         record_run(recording, result, sample_points=surface.points, sample_normals=surface.normals)
     return result
 
+
+generate.__signature__ = _signature_with_fields(generate, Params, QualityOptions)  # type: ignore[attr-defined]
 
 # --------------------------------------------------------------------------------------------------------------------
 # the stages of generate(), each a function of the run and the earlier stages' results
@@ -551,27 +534,26 @@ def recluster(
     *,
     k1: int,
     k2: int,
-    seed: int = 0,
+    seed: int = Params.seed,
     recording: Any = None,
     progress: Progress | None = None,
-    select: str = "medoid",
-    validate: bool = False,
     mass_kg: float | None = None,
     density: float | None = None,
-    repair_limit: int = REPAIR_LIMIT,
-    sim_workers: int | None = None,
     mesh: str | os.PathLike | trimesh.Trimesh | Part | None = None,
     units: str | None = None,
+    options: QualityOptions | None = None,
+    **quality: Any,
 ) -> GraspSet:
     """A new selection from stored candidates with other k1 / k2 / seed, without regenerating them.
 
-    `select` and `validate` as in generate(); validation, and quality scoring of candidates stored without
+    The quality options (select, validate, repair_limit, sim_workers: the fields of `QualityOptions`) as in
+    generate(), as keywords or a ready `options=`; validation, and quality scoring of candidates stored without
     quality terms, need the part: `mesh` (a Part, a mesh in metres, or a path with `units`).
     """
     from .export import load_candidates
 
     report = progress or _noop
-    options = QualityOptions(select=select, validate=validate, repair_limit=repair_limit, sim_workers=sim_workers)
+    (options,) = from_keywords("recluster", quality, (QualityOptions, options))
     t_all = time.perf_counter()
     cands = candidates if isinstance(candidates, Candidates) else load_candidates(candidates)
     spec = GripperSpec.from_dict(previous_export["gripper"])
@@ -615,6 +597,9 @@ def recluster(
 
         record_run(recording, result, sample_points=None, sample_normals=None)
     return result
+
+
+recluster.__signature__ = _signature_with_fields(recluster, QualityOptions)  # type: ignore[attr-defined]
 
 
 def _cluster_and_export(cands, obj, spec, params, mu, stats, report, t_all, warnings, extras=None) -> GraspSet:

@@ -3,24 +3,28 @@ pick query (CONTRACT.md; docs/API.md explains frames and units).
 
 GripperSpec, JobParams and GraspSetExport *document*: the routes still hand the raw JSON to graspgen
 (GripperSpec.from_dict, Params.from_dict), which stays the single source of validation and of its messages; the
-schemas state the same rules. The export models allow extra fields, so fields the library adds pass through.
-PickRequest validates shapes and types; the numbers (pose orthonormality, non-zero vectors, ranges) are checked by
-graspgen.pick.PickQuery with the same rules as the Python API.
+schemas state the same rules. JobParams is built from the declared fields of graspgen's Params and QualityOptions
+(`job_params_model`): each parameter's type, range, choices and default are params.py's. The export models allow extra
+fields, so fields the library adds pass through. PickRequest validates shapes and types; the numbers (pose
+orthonormality, non-zero vectors, ranges) are checked by graspgen.pick.PickQuery with the same rules as the Python API.
 """
 
 from __future__ import annotations
 
+import json
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, create_model, model_validator
 
 from graspgen.examples import EXAMPLE_GRIPPER
 from graspgen.gripper import SLUG_PATTERN
+from graspgen.params import ParamOption, Params, QualityOptions, param_options
 from graspgen.pick import DEFAULT_LIMIT, DEFAULT_PREGRASP_DISTANCE, MAX_LIMIT, MAX_PLANES
 
 __all__ = [
     "GripperSpec",
     "JobParams",
+    "job_params_model",
     "GraspSetExport",
     "ExportGrasp",
     "PickRequest",
@@ -70,47 +74,67 @@ class GripperSpec(BaseModel):
 
 
 # -- job params -------------------------------------------------------------------------------------------------------
-class JobParams(BaseModel):
-    """Parameters of a job (CONTRACT.md CLI and HTTP API); every field is optional. graspgen's Params and the job
-    service check them; unknown names are refused. A `cluster` job takes only k1, k2, seed and the quality fields."""
+#: what a job adds to a parameter's description (the service's own rules beyond graspgen's)
+JOB_NOTES = {"mass_kg": "a job's default: the object version's mass_kg unless density is given"}
 
-    model_config = ConfigDict(
-        extra="forbid",
-        json_schema_extra={
-            "examples": [
-                {"points": 10000, "safety_factor": 1.5, "rolls": 16, "k1": 16, "k2": 4, "seed": 0},
-                {"points": 10000, "density": 7850, "hold": "any", "accel": 9.81, "select": "best-near-medoid"},
-            ]
-        },
+
+def job_params_model(
+    params_cls: type[Params] = Params, options_cls: type[QualityOptions] = QualityOptions
+) -> type[BaseModel]:
+    """The model of a job's params: one optional field per field of `params_cls` and per job option of
+    `options_cls`, typed, bounded and described as params.py declares it (`_option`). Absent means the default, which
+    the description names (the schema's own `default` stays null: graspgen fills it in); null is accepted only where
+    graspgen accepts it (the `T | None` fields); unknown names are refused."""
+    quality = [o for o in param_options(options_cls) if o.name in options_cls.JOB_OPTIONS]
+    defs: dict[str, Any] = {}
+    for o in (*param_options(params_cls), *quality):
+        key = o.name + "_" if hasattr(BaseModel, o.name) else o.name  # `validate` is a BaseModel method
+        kind: Any = Literal[o.choices] if o.choices else o.kind
+        field = Field(
+            None,
+            alias=o.name if key != o.name else None,
+            ge=o.ge,
+            gt=o.gt,
+            le=o.le,
+            description=_job_description(o, params_cls, options_cls),
+        )
+        defs[key] = (kind | None if o.optional else kind, field)
+    return create_model(
+        "JobParams",
+        __config__=ConfigDict(
+            extra="forbid",
+            json_schema_extra={
+                "examples": [
+                    {"points": 10000, "safety_factor": 1.5, "rolls": 16, "k1": 16, "k2": 4, "seed": 0},
+                    {"points": 10000, "density": 7850, "hold": "any", "accel": 9.81, "select": "best-near-medoid"},
+                ]
+            },
+        ),
+        __doc__="Parameters of a job (CONTRACT.md CLI and HTTP API); every field is optional. graspgen's Params and "
+        "the job service check them; unknown names are refused. A `cluster` job takes only k1, k2, seed and the "
+        "quality fields.",
+        **defs,
     )
-    # absent means the default; null is accepted only where graspgen accepts it (friction, mass_kg, density)
-    points: int = Field(None, ge=100, le=1_000_000, description="surface samples (default 10000)")
-    friction: float | None = Field(None, gt=0, le=10, description="Coulomb coefficient; default the gripper's")
-    safety_factor: float = Field(None, ge=1, le=100, description="friction cone half-angle divisor (default 1.5)")
-    rolls: int = Field(None, ge=1, le=64, description="roll angles 2 pi k / rolls tested per pair (default 16)")
-    k1: int = Field(None, ge=1, le=10_000, description="translation clusters (default 16)")
-    k2: int = Field(None, ge=1, le=1_000, description="direction clusters per translation cluster (default 4)")
-    inside: bool = Field(None, description="also grasp from inside (bores), fingers opening outwards")
-    collision: Literal["swept", "paper"] = Field(None, description="collision model of criterion (d)")
-    seed: int = Field(None, ge=0, le=2**32 - 1)
-    mass_kg: float | None = Field(
-        None, gt=0, le=100_000, description="part mass, kg (criterion (e)); default the object's; not with density"
-    )
-    density: float | None = Field(
-        None, ge=1, le=100_000, description="part density, kg/m^3 (mass = density x mesh volume); not with mass_kg"
-    )
-    accel: float = Field(None, ge=0, le=1_000, description="acceleration the hold must resist, m/s^2 (default 9.81)")
-    hold: Literal["any", "off"] = Field(None, description="criterion (e): `off` switches it off (default any)")
-    position_tolerance: float = Field(
-        None, ge=0, le=0.05, description="m: criterion (c) must hold for every normal this close to a contact"
-    )
-    select: Literal["medoid", "best-near-medoid"] | None = Field(None, description="docs/QUALITY.md")
-    validate_: bool | None = Field(
-        None,
-        alias="validate",
-        description="simulate every exported grasp in MuJoCo (nominal, mass x1.5, friction x0.8, soft friction at "
-        "mass x1.5: it must hold in all four) and repair failures",
-    )
+
+
+def _job_description(o: ParamOption, params_cls: type[Params], options_cls: type[QualityOptions]) -> str:
+    """The option's help, its default (when it has one), the options it excludes and the job's own note."""
+    text = o.help
+    if o.default is not None:
+        text += f" (default {o.default if isinstance(o.default, str) else json.dumps(o.default)})"
+    if o.exclusive:
+        others = [
+            p.name
+            for p in (*param_options(params_cls), *param_options(options_cls))
+            if p.exclusive == o.exclusive and p.name != o.name
+        ]
+        text += "; not with " + " or ".join(others)
+    if o.name in JOB_NOTES:
+        text += "; " + JOB_NOTES[o.name]
+    return text
+
+
+JobParams = job_params_model()
 
 
 # -- the grasp_set/1 export -------------------------------------------------------------------------------------------

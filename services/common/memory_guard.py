@@ -4,7 +4,8 @@ Checked twice: at submission (`POST /v1/jobs`: a 422 `memory-limit` problem nami
 fits, no job row) and by the worker before it runs a job (the job fails with the same problem, is acknowledged and
 never redelivered), because the worker's budget is the one that matters and a job may have been queued before it
 changed. A probe (one pipeline run at graspgen.memory.PROBE_POINTS points, ~0.3 s) is kept per part, gripper and
-the parameters that change the candidate density, in a small per-process LRU, so resubmissions cost nothing.
+the parameters that change the candidate density (graspgen.memory.probe_params), in a small per-process LRU, so
+resubmissions cost nothing.
 """
 
 from __future__ import annotations
@@ -15,20 +16,19 @@ from collections import OrderedDict
 from collections.abc import Callable
 from typing import Any
 
-from graspgen.memory import MemoryEstimate, MemoryLimitError, Probe, limit_error, probe
+from graspgen.memory import MemoryEstimate, MemoryLimitError, Probe, limit_error, probe, probe_params
+from graspgen.params import Params, from_job
 
-__all__ = ["check_generate", "DENSITY_PARAMS", "problem_extra"]
+__all__ = ["check_generate", "problem_extra"]
 
-#: job params that change the candidates per point squared (points, k1, k2, seed, quality options do not)
-DENSITY_PARAMS = ("friction", "safety_factor", "rolls", "inside", "collision")
 _MAX_PROBES = 256
 _probes: OrderedDict[str, Probe] = OrderedDict()
 _lock = threading.Lock()
 
 
-def _key(part_sha256: str, units: str, spec: dict[str, Any], params: dict[str, Any]) -> str:
-    dens = {k: params.get(k) for k in DENSITY_PARAMS}
-    return json.dumps([part_sha256, units, spec, dens], sort_keys=True, default=str)
+def _key(part_sha256: str, units: str, spec: dict[str, Any], params: Params) -> str:
+    """Runs with the same part, gripper and probe parameters (graspgen.memory.probe_params) share a probe."""
+    return json.dumps([part_sha256, units, spec, probe_params(params).to_dict()], sort_keys=True, default=str)
 
 
 def check_generate(
@@ -41,19 +41,21 @@ def check_generate(
     load_part: Callable[[], Any],
 ) -> MemoryEstimate:
     """The estimate of a generate job with these (effective) params, or `MemoryLimitError` when it exceeds the
-    budget. `load_part()` returns the graspgen Part; it is called only when no probe of this part is cached."""
-    key = _key(part_sha256, units, spec, params)
+    budget. `params` is the job's stored params dict (graspgen.params.from_job). `load_part()` returns the graspgen
+    Part; it is called only when no probe of this part is cached."""
+    run, _ = from_job(params)
+    key = _key(part_sha256, units, spec, run)
     with _lock:
         pr = _probes.get(key)
         if pr is not None:
             _probes.move_to_end(key)
     if pr is None:
-        pr = probe(load_part(), spec, **{k: params[k] for k in DENSITY_PARAMS if k in params})
+        pr = probe(load_part(), spec, run)
         with _lock:
             _probes[key] = pr
             while len(_probes) > _MAX_PROBES:
                 _probes.popitem(last=False)
-    est = pr.estimate(int(params["points"]))
+    est = pr.estimate(run.points)
     if est.peak_bytes > budget_bytes:
         raise limit_error(pr, est, budget_bytes)
     return est

@@ -10,12 +10,12 @@ from pydantic import ConfigDict, Field
 from sqlalchemy.orm import Session
 
 from graspgen.errors import InvalidParameterError
-from graspgen.params import Params, QualityOptions
+from graspgen.params import Params, from_job
 from services.api.schemas import ID_MAX, PARAMS_DOC, NoNulModel
 from services.common.models import GraspSet as GraspSetRow
 
 from .kind import JobKind, RunContext
-from .params import QUALITY_PARAMS, given_kwargs, split_quality
+from .params import QUALITY_PARAMS, split_quality
 
 if TYPE_CHECKING:
     from graspgen.export import GraspSet
@@ -23,8 +23,6 @@ if TYPE_CHECKING:
 __all__ = ["KIND", "ClusterJobRequest", "resolve", "run", "CLUSTER_PARAMS"]
 
 CLUSTER_PARAMS = ("k1", "k2", "seed")
-#: recluster takes the mass for validation only
-RECLUSTER_HOLD_PARAMS = ("mass_kg", "density")
 
 
 class ClusterJobRequest(NoNulModel):
@@ -84,20 +82,23 @@ def run(ctx: RunContext) -> GraspSet:
     assert inp.source_candidates_key and inp.source_export_key
     npz = ctx.storage.download(inp.source_candidates_key, ctx.tmp / "source-candidates.npz")
     previous = json.loads(ctx.storage.get_bytes(inp.source_export_key))
-    quality = given_kwargs(p, QUALITY_PARAMS)
-    if QualityOptions(**quality).needs_part:
+    params, options = from_job(p)
+    part: dict[str, str] = {}
+    if options.needs_part:
         # validation and quality scoring need the part; recluster loads it in metres from `units`
-        quality.update(mesh=str(ctx.download_part()), units=inp.units)
+        part = {"mesh": str(ctx.download_part()), "units": inp.units}
     return graspgen.recluster(
         str(npz),
         previous,
-        k1=p["k1"],
-        k2=p["k2"],
-        seed=p["seed"],
+        k1=params.k1,
+        k2=params.k2,
+        seed=params.seed,
         recording=ctx.recording,
         progress=ctx.progress,
-        **quality,
-        **given_kwargs(p, RECLUSTER_HOLD_PARAMS),
+        options=options,
+        mass_kg=params.mass_kg,  # recluster takes the mass for validation only
+        density=params.density,
+        **part,
     )
 
 

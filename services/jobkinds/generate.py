@@ -8,21 +8,18 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal
 from pydantic import ConfigDict, Field
 from sqlalchemy.orm import Session
 
-from graspgen.params import Params
+from graspgen.params import Params, QualityOptions, from_job
 from services.api.schemas import ID_MAX, PARAMS_DOC, PARAMS_EXAMPLE, SLUG, BulkItem, NoNulModel
 from services.common.models import GripperVersion, ObjectVersion
 from services.common.versions import GRIPPERS, OBJECTS, Versioned, find_version
 
 from .kind import JobKind, RunContext
-from .params import QUALITY_PARAMS, given_kwargs, split_quality
+from .params import JOB_PARAM_NAMES, split_quality
 
 if TYPE_CHECKING:
     from graspgen.export import GraspSet
 
-__all__ = ["KIND", "GenerateJobRequest", "resolve", "run", "HOLD_PARAMS"]
-
-#: criterion (e) and the contact tolerance: graspgen.Params fields, passed by name
-HOLD_PARAMS = ("mass_kg", "density", "accel", "hold", "position_tolerance")
+__all__ = ["KIND", "GenerateJobRequest", "resolve", "run"]
 
 
 class GenerateJobRequest(NoNulModel):
@@ -49,12 +46,10 @@ class GenerateJobRequest(NoNulModel):
     gripper_version: int | None = Field(None, ge=1, le=ID_MAX, description="default: the newest version")
     params: Annotated[dict[str, Any] | None, PARAMS_DOC] = Field(
         None,
-        description="any of points, friction, safety_factor, rolls, k1, k2, inside, collision, seed; validate (bool, "
-        "simulate every exported grasp in MuJoCo under four settings and repair failures), "
-        "select ('medoid' | 'best-near-medoid'), "
-        "density (part density, kg/m^3, 1..100000); docs/QUALITY.md. mass_kg (kg; default: the object version's "
-        "mass_kg unless density is given), accel (m/s^2), hold ('any' | 'off'), position_tolerance (m): criterion "
-        "(e), CONTRACT.md.",
+        description=f"any of {', '.join(JOB_PARAM_NAMES)} (JobParams: each one's type, range and default). "
+        "mass_kg defaults to the object version's mass_kg unless density is given; validate (simulate every exported "
+        "grasp in MuJoCo under four settings and repair failures) and select: docs/QUALITY.md; criterion (e) "
+        "(mass_kg or density, accel, hold) and position_tolerance: CONTRACT.md.",
         examples=[
             {"points": 10000, "k1": 16, "k2": 4, "validate": True, "select": "best-near-medoid", "density": 7850}
         ],
@@ -97,30 +92,26 @@ def resolve(session: Session, body: GenerateJobRequest | BulkItem) -> dict[str, 
 
 
 # -- the run (the worker) ---------------------------------------------------------------------------------------------
-def run(ctx: RunContext) -> GraspSet:
+def run(
+    ctx: RunContext, params_cls: type[Params] = Params, options_cls: type[QualityOptions] = QualityOptions
+) -> GraspSet:
+    """graspgen.generate with the job's stored params, as `params_cls` and `options_cls` (graspgen.params.from_job):
+    every field of Params reaches the run without naming it here."""
     import graspgen
 
-    inp, p = ctx.inputs, ctx.inputs.params
+    inp = ctx.inputs
+    params, options = from_job(inp.params, params_cls, options_cls)
     loaded = ctx.load_part(ctx.download_part())  # MemoryLimitError: the job fails, never redelivered
     return graspgen.generate(
         loaded,
         inp.spec,
         units=inp.units,
-        points=p["points"],
-        friction=p["friction"],
-        safety_factor=p["safety_factor"],
-        rolls=p["rolls"],
-        k1=p["k1"],
-        k2=p["k2"],
-        inside=p["inside"],
-        collision=p["collision"],
-        seed=p["seed"],
+        params=params,
+        options=options,
         recording=ctx.recording,
         progress=ctx.progress,
         object_name=inp.object_name,
         object_version=inp.object_version,
-        **given_kwargs(p, QUALITY_PARAMS),
-        **given_kwargs(p, HOLD_PARAMS),
     )
 
 

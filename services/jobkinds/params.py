@@ -1,16 +1,20 @@
-"""Job params shared by the kinds that run: the quality options (docs/QUALITY.md), which are keyword arguments of
-graspgen.generate / recluster beside graspgen.Params, checked at submission and passed by name at run time."""
+"""Job params shared by the kinds that run: graspgen.Params and the job options of graspgen.QualityOptions
+(docs/QUALITY.md), checked at submission and handed to graspgen as those objects at run time (graspgen.params.from_job).
+"""
 
 from __future__ import annotations
 
+from dataclasses import fields
 from typing import Any
 
-from graspgen.params import QualityOptions
+from graspgen.params import Params, QualityOptions
 
-__all__ = ["QUALITY_PARAMS", "split_quality", "given_kwargs"]
+__all__ = ["QUALITY_PARAMS", "JOB_PARAM_NAMES", "split_quality"]
 
-#: job params beyond graspgen.Params: keyword arguments of graspgen.generate / recluster
+#: job params beyond graspgen.Params: the job options of graspgen.QualityOptions
 QUALITY_PARAMS = QualityOptions.JOB_OPTIONS
+#: every name a job's params may carry
+JOB_PARAM_NAMES = (*(f.name for f in fields(Params)), *QUALITY_PARAMS)
 
 
 def split_quality(given: dict[str, Any] | None) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -19,9 +23,3 @@ def split_quality(given: dict[str, Any] | None) -> tuple[dict[str, Any], dict[st
     only when not "medoid". `density` is a core parameter (graspgen.Params: criterion (e) and validation)."""
     core, options = QualityOptions.split_job(given)
     return core, options.job_dict()
-
-
-def given_kwargs(params: dict[str, Any], names: tuple[str, ...]) -> dict[str, Any]:
-    """The stored params among `names` that have a value, as keyword arguments (a job stored before a param existed
-    has none of it and runs with the core's default)."""
-    return {k: params[k] for k in names if params.get(k) is not None}

@@ -47,11 +47,12 @@ class Dispatcher(ABC):
 
 class CeleryDispatcher(Dispatcher):
     def __init__(self, settings: Settings) -> None:
-        from services.worker.celery_app import make_celery
+        from services.worker.celery_app import RUN_JOB, make_celery
 
         self.settings = settings
         self.app = make_celery(settings)
         self.queue = settings.queue
+        self.task_name = RUN_JOB
 
     def send(self, job_ids: Sequence[str]) -> None:
         from celery import group
@@ -59,7 +60,7 @@ class CeleryDispatcher(Dispatcher):
         headers = _request_headers()
         try:
             sig = [
-                self.app.signature("graspgen.run_job", args=(jid,), immutable=True).set(
+                self.app.signature(self.task_name, args=(jid,), immutable=True).set(
                     task_id=jid, queue=self.queue, headers=headers
                 )
                 for jid in job_ids
