@@ -4,7 +4,6 @@ for byte by scripts/make_example_grippers.py, valid specs, and the shapes they c
 from __future__ import annotations
 
 import importlib.util
-import json
 from pathlib import Path
 
 import numpy as np
