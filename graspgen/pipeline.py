@@ -574,11 +574,14 @@ def recluster(
     sim_workers: int | None = None,
     mesh: str | os.PathLike | trimesh.Trimesh | Part | None = None,
     units: str | None = None,
+    gripper: GripperSpec | None = None,
 ) -> GraspSet:
     """A new selection from stored candidates with other k1 / k2 / seed, without regenerating them.
 
     `select` and `validate` as in generate(); validation, and quality scoring of candidates stored without
-    quality terms, need the part: `mesh` (a Part, a mesh in metres, or a path with `units`).
+    quality terms, need the part: `mesh` (a Part, a mesh in metres, or a path with `units`). `gripper`: the spec the
+    set was made with, required when it has geometry (the export names its mesh files and their digests, not their
+    contents); its to_dict() must be the export's `gripper`.
     """
     from .export import load_candidates
 
@@ -586,7 +589,12 @@ def recluster(
     options = QualityOptions(select=select, validate=validate, repair_limit=repair_limit, sim_workers=sim_workers)
     t_all = time.perf_counter()
     cands = candidates if isinstance(candidates, Candidates) else load_candidates(candidates)
-    spec = GripperSpec.from_dict(previous_export["gripper"])
+    if gripper is None:
+        spec = GripperSpec.from_dict(previous_export["gripper"])
+    elif gripper.to_dict() == previous_export["gripper"]:
+        spec = gripper
+    else:
+        raise InvalidParameterError("gripper is not the spec the grasp set was made with", field="gripper")
     old = dict(previous_export["params"])
     mu = float(old.get("friction") or spec.friction)
     # the export carries the mass the run resolved beside the density it may have come from
