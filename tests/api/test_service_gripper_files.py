@@ -219,3 +219,13 @@ def test_openapi_documents_the_multipart_form(pg_service):
     assert {"units", "finger", "finger_left", "body", "pad"} <= set(
         schema["components"]["schemas"]["GripperGeometry"]["properties"]
     )
+
+
+def test_spec_may_come_as_a_file_part(pg_service):
+    name = slug("curl")
+    spec = json.dumps(spec_of(name)).encode()
+    parts = [("spec", ("spec.json", spec, "application/json"))]
+    parts += [(n, (n, b, "model/stl")) for n, b in {"finger.stl": FINGER, "meshes/body.stl": BODY}.items()]
+    r = pg_service.post("/v1/grippers", files=parts)
+    assert r.status_code == 201, r.text
+    assert r.json()["spec"]["name"] == name

@@ -74,11 +74,14 @@ async def _multipart(request: Request, settings: Settings) -> tuple[Any, dict[st
     # BodyLimitMiddleware, each file by max_upload_bytes below
     async with request.form(max_files=_MAX_PARTS, max_fields=_MAX_PARTS, max_part_size=settings.max_json_bytes) as form:
         spec_field = form.getlist("spec")
-        if len(spec_field) != 1 or not isinstance(spec_field[0], str):
-            raise ApiError(422, "invalid-gripper", "the multipart body needs one text field `spec`", field="spec")
+        if len(spec_field) != 1:
+            raise ApiError(422, "invalid-gripper", "the multipart body needs one field `spec` (the JSON)", field="spec")
+        text = spec_field[0]
+        if isinstance(text, UploadFile):  # sent as a file part (curl -F spec=@spec.json)
+            text = await _read_limited(text, "spec", settings.max_json_bytes)
         try:
-            spec = json.loads(spec_field[0])
-        except ValueError as exc:
+            spec = json.loads(text)
+        except (ValueError, UnicodeDecodeError) as exc:
             raise ApiError(422, "invalid-gripper", f"field `spec` is not valid JSON: {exc}", field="spec") from None
         files: dict[str, bytes] = {}
         for key, value in form.multi_items():
