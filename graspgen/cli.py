@@ -186,7 +186,9 @@ def _preview_of(mesh_path: str, units: str):
         from .parts import load_part
         from .render import render_grasp_set
 
-        return render_grasp_set(load_part(mesh_path, units=units).surface_mesh(), result.to_json())
+        return render_grasp_set(
+            load_part(mesh_path, units=units).surface_mesh(), result.to_json(), gripper=result.gripper
+        )
 
     return preview
 

@@ -299,9 +299,12 @@ def test_cli_generates_with_a_geometry_spec(tmp_path):
             "--k2",
             "2",
             "--quiet",
+            "--preview",
+            str(tmp_path / "preview.png"),
         ]
     )
     assert code == 0
+    assert (tmp_path / "preview.png").read_bytes().startswith(b"\x89PNG")
     gripper = json.loads(out.read_text())["gripper"]
     assert gripper["geometry"]["sha256"]["finger.stl"] == hashlib.sha256(stl_bytes(FINGER)).hexdigest()
     assert "finger_width" not in gripper
