@@ -66,6 +66,10 @@ def test_generate_and_cluster_jobs_use_the_meshes(pg_service, runner):
     export = pg_service.get(f"/v1/grasp-sets/{gs}").json()
     assert export["gripper"] == out["spec"]  # the spec with its files' digests, no box fields
     assert export["grasps"]
+    # the pick query loads the gripper with its meshes too
+    eye = [[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, 0], [0, 0, 0, 1.0]]
+    pick = pg_service.post("/v1/pick", who="reader", json={"grasp_set": gs, "T_world_object": eye, "limit": 3})
+    assert pick.status_code == 200 and pick.json()["considered"] > 0, pick.text
     c = pg_service.post("/v1/jobs", json={"kind": "cluster", "grasp_set": gs, "params": {"k1": 2, "k2": 1}})
     assert c.status_code == 202, c.text
     cid = c.json()["id"]

@@ -63,9 +63,12 @@ async def _spec_and_files(request: Request, settings: SettingsDep) -> tuple[Any,
     if not request.headers.get("content-type", "").lower().startswith("multipart/form-data"):
         body = await request.body()
         try:
-            return json.loads(body), None
+            data = json.loads(body)
         except (ValueError, UnicodeDecodeError) as exc:
             raise ApiError(422, "validation-error", f"the body is not valid JSON: {exc}") from None
+        if not isinstance(data, dict):  # as the JSON body's schema says (and said before the multipart form)
+            raise ApiError(422, "validation-error", "body: Input should be a valid dictionary (the gripper spec)")
+        return data, None
     return await _multipart(request, settings)
 
 
