@@ -206,18 +206,13 @@ class Client:
         names = _geometry_files(body)
         if not names:
             return self._send("POST", "/v1/grippers", safe=True, json=_jsonable(body)).json()
-        parts = []
-        for name in names:
-            if files is not None:
-                if name not in files:
-                    raise ClientError(f"the spec's geometry names {name!r} but files= has no such entry")
-                given = files[name]
-                data = given if isinstance(given, bytes) else Path(given).read_bytes()
-            elif base_dir is not None:
-                data = (Path(base_dir) / name).read_bytes()
-            else:
-                raise ClientError("a spec with geometry needs its mesh files: pass files= or base_dir=")
-            parts.append((name, (name.rsplit("/", 1)[-1], data, "application/octet-stream")))
+        if files is not None:  # every file given goes: the server names a missing or an extra one (422)
+            given = {n: v if isinstance(v, bytes) else Path(v).read_bytes() for n, v in files.items()}
+        elif base_dir is not None:
+            given = {n: (Path(base_dir) / n).read_bytes() for n in names}
+        else:
+            raise ClientError("a spec with geometry needs its mesh files: pass files= or base_dir=")
+        parts = [(n, (n.rsplit("/", 1)[-1], data, "application/octet-stream")) for n, data in given.items()]
         form = {"spec": json.dumps(_jsonable(body))}
         # registering is idempotent (the same spec and files give the same version), so it is safe to send again
         return self._send("POST", "/v1/grippers", safe=True, data=form, files=parts).json()
