@@ -1,5 +1,6 @@
-"""`graspgen` command line: generate, demo; serve / worker / migrate start the service, found through the entry-point
-group `graspgen.service` (the library never imports it; `pip install 'graspgen[service]'` installs it).
+"""`graspgen` command line: generate, demo, render, gripper import, warmup; serve / worker / migrate start the
+service, found through the entry-point group `graspgen.service` (the library never imports it; `pip install
+'graspgen[service]'` installs it).
 
 Exit status: 0 success, 2 bad input (one-line reason on stderr, no output written), 1 internal error.
 """
@@ -94,6 +95,22 @@ def _parser(
     r.add_argument("--units", required=True, choices=tuple(UNIT_SCALE), help="the length unit of the mesh")
     r.add_argument("--out", required=True, help="PNG to write")
     r.add_argument("--size", default="800x600", help="WIDTHxHEIGHT in pixels (default 800x600)")
+    gr = sub.add_parser("gripper", help="gripper specs: import a URDF")
+    gsub = gr.add_subparsers(dest="gripper_command", required=True, parser_class=_Parser)
+    imp = gsub.add_parser("import", help="a URDF of a parallel gripper -> a spec with geometry and its meshes")
+    imp.add_argument("urdf", help="the gripper's URDF (two prismatic finger joints, e.g. one a mimic)")
+    imp.add_argument("--out", required=True, help="folder to write <name>.json and its STL meshes into")
+    imp.add_argument("--name", help="gripper name (default: the URDF's robot name, as a slug)")
+    imp.add_argument("--friction", type=float, default=0.5, help="pad/part friction (default %(default)s)")
+    imp.add_argument(
+        "--pregrasp-clearance", type=float, default=0.02, help="extra opening before closing, m (default %(default)s)"
+    )
+    imp.add_argument(
+        "--approach", help="approach direction X,Y,Z in the URDF's root link frame (default: body->fingers)"
+    )
+    imp.add_argument(
+        "--package", action="append", default=[], metavar="NAME=DIR", help="folder of a ROS package (package://)"
+    )
     w = sub.add_parser("warmup", help="compile every numba kernel into numba's on-disk cache (no cold start)")
     w.add_argument("--quiet", action="store_true", help="print nothing but errors")
     for name in SERVICE_COMMANDS:
@@ -138,6 +155,8 @@ def main(argv: list[str] | None = None) -> int:
             return _render(args)
         if args.command == "warmup":
             return _warmup(args)
+        if args.command == "gripper":
+            return _gripper_import(args)
         return _demo(args)
     except GraspgenError as exc:
         print(f"graspgen: error: {exc.message}", file=sys.stderr)
@@ -178,7 +197,9 @@ def _preview_of(mesh_path: str, units: str):
         from .parts import load_part
         from .render import render_grasp_set
 
-        return render_grasp_set(load_part(mesh_path, units=units).surface_mesh(), result.to_json())
+        return render_grasp_set(
+            load_part(mesh_path, units=units).surface_mesh(), result.to_json(), gripper=result.gripper
+        )
 
     return preview
 
@@ -200,6 +221,40 @@ def _render(args: argparse.Namespace) -> int:
     mesh = load_part(args.mesh, units=args.units).surface_mesh()
     write_atomic(args.out, render_grasp_set(mesh, export, size=size))
     print(f"wrote {args.out} ({size[0]}x{size[1]}, {len(export['grasps'])} grasps)")
+    return 0
+
+
+def _gripper_import(args: argparse.Namespace) -> int:
+    from .urdf import import_urdf
+
+    approach = None
+    if args.approach is not None:
+        try:
+            approach = tuple(float(v) for v in args.approach.split(","))
+        except ValueError:
+            approach = ()
+        if len(approach) != 3:
+            raise GraspgenError(f"--approach must be three numbers X,Y,Z, got {args.approach!r}")
+    packages = {}
+    for item in args.package:
+        name, sep, folder = item.partition("=")
+        if not sep or not name or not folder:
+            raise GraspgenError(f"--package must be NAME=DIR, got {item!r}")
+        packages[name] = folder
+    spec_path = import_urdf(
+        args.urdf,
+        args.out,
+        name=args.name,
+        friction=args.friction,
+        pregrasp_clearance=args.pregrasp_clearance,
+        approach=approach,
+        packages=packages,
+    )
+    from .gripper import GripperSpec
+
+    spec = GripperSpec.load(spec_path)
+    files = ", ".join(sorted(spec.geometry.sha256))
+    print(f"wrote {spec_path} ({files}): stroke {spec.stroke * 1e3:.4g} mm, min_width {spec.min_width * 1e3:.4g} mm")
     return 0
 
 

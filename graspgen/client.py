@@ -6,6 +6,7 @@ from graspgen.client import Client
 with Client("http://graspgen:8000", token) as gg:
     gg.upload_object("ring-screw.stl", name="ring-screw", units="mm")
     gg.create_gripper(json.load(open("pgn-80.json")))
+    gg.upload_gripper("examples/pgn-80-vgroove.json")  # a spec with geometry, with its mesh files
     job = gg.wait(gg.submit_job("ring-screw", "pgn-80", params={"points": 10000}))
     gg.release(job["grasp_set"])
     best = gg.pick(T_world_object, object="ring-screw", gripper="pgn-80",
@@ -75,6 +76,15 @@ class CatalogueEntry:
     export: dict[str, Any]
     #: True when the server answered 304 and the export came from the local cache
     from_cache: bool
+
+
+def _geometry_files(spec: Mapping[str, Any]) -> list[str]:
+    """The distinct mesh file names a spec's geometry gives (finger, finger_left, body), in that order."""
+    geometry = spec.get("geometry")
+    if not isinstance(geometry, Mapping):
+        return []
+    names = [geometry[k] for k in ("finger", "finger_left", "body") if isinstance(geometry.get(k), str)]
+    return list(dict.fromkeys(names))
 
 
 def _jsonable(value: Any) -> Any:
@@ -180,10 +190,41 @@ class Client:
     def object(self, name: str) -> dict[str, Any]:
         return self._get(f"/v1/objects/{name}")
 
-    def create_gripper(self, spec: Mapping[str, Any] | Any) -> dict[str, Any]:
-        """Register a gripper spec (dict or graspgen.GripperSpec); an identical spec gives the existing version."""
+    def create_gripper(
+        self,
+        spec: Mapping[str, Any] | Any,
+        *,
+        files: Mapping[str, bytes | str | os.PathLike] | None = None,
+        base_dir: str | os.PathLike | None = None,
+    ) -> dict[str, Any]:
+        """Register a gripper spec (dict or graspgen.GripperSpec); an identical spec gives the existing version.
+
+        A spec with `geometry` (CONTRACT.md "Gripper geometry from CAD") goes as multipart with the mesh files it
+        names: `files` maps each name to its bytes or a path; else each is read relative to `base_dir`. The same spec
+        and files again give the existing version; a changed file gives a new one."""
         body = spec.to_dict() if hasattr(spec, "to_dict") else dict(spec)
-        return self._send("POST", "/v1/grippers", safe=True, json=_jsonable(body)).json()
+        names = _geometry_files(body)
+        if not names:
+            return self._send("POST", "/v1/grippers", safe=True, json=_jsonable(body)).json()
+        if files is not None:  # every file given goes: the server names a missing or an extra one (422)
+            given = {n: v if isinstance(v, bytes) else Path(v).read_bytes() for n, v in files.items()}
+        elif base_dir is not None:
+            given = {n: (Path(base_dir) / n).read_bytes() for n in names}
+        else:
+            raise ClientError("a spec with geometry needs its mesh files: pass files= or base_dir=")
+        parts = [(n, (n.rsplit("/", 1)[-1], data, "application/octet-stream")) for n, data in given.items()]
+        form = {"spec": json.dumps(_jsonable(body))}
+        # registering is idempotent (the same spec and files give the same version), so it is safe to send again
+        return self._send("POST", "/v1/grippers", safe=True, data=form, files=parts).json()
+
+    def upload_gripper(self, spec_path: str | os.PathLike) -> dict[str, Any]:
+        """Register the gripper spec in a JSON file, with the mesh files its geometry names (relative to it)."""
+        path = Path(spec_path)
+        return self.create_gripper(json.loads(path.read_text(encoding="utf-8")), base_dir=path.parent)
+
+    def gripper_file(self, name: str, version: int, path: str) -> bytes:
+        """The bytes of mesh file `path` of gripper `name` version `version`, as uploaded."""
+        return self._send("GET", f"/v1/grippers/{name}/versions/{version}/files/{path}", safe=True).content
 
     def gripper(self, name: str) -> dict[str, Any]:
         return self._get(f"/v1/grippers/{name}")

@@ -44,6 +44,7 @@ from .units import UNIT_SCALE, extents_under_each_unit, to_metres, to_metres_sca
 __all__ = [
     "Part",
     "load_part",
+    "load_solid",
     "read_raw_extents",
     "estimate_normals",
     "MESH_TYPES",
@@ -137,6 +138,90 @@ def load_part(
     return _mesh_part(raw, scale, part_name, source_units)
 
 
+def load_solid(
+    source: str | os.PathLike | bytes,
+    *,
+    units: str,
+    file_type: str | None = None,
+    label: str | None = None,
+    what: str = "a solid",
+    max_triangles: int | None = None,
+    extent_range: tuple[float, float] = (MIN_EXTENT, MAX_EXTENT),
+    max_decoded_bytes: int = MAX_DECODED_BYTES,
+) -> tuple[trimesh.Trimesh, str]:
+    """A closed solid (a gripper's finger or body) from a mesh file in `units`: (mesh in metres, hex sha256 of the
+    file's bytes).
+
+    Stricter than `load_part`, which repairs what it can: the mesh must be watertight, consistently wound with
+    outward normals (positive volume: an inside-out mesh is refused, not inverted) and enclose a volume. Vertices are
+    merged and faces cleaned as for parts (module docstring). `source` is a path or the file's bytes (then
+    `file_type` is required); only mesh formats (MESH_TYPES) are read. `label` names the input in messages;
+    `max_triangles` bounds the triangles in the file (a binary STL's header is checked before anything is decoded);
+    `extent_range` bounds the largest extent in metres, `what` names the solid in that message. Raises
+    `InvalidUnitsError` for bad units, `InvalidMeshError` (field "file" or "units") for anything else.
+    """
+    to_metres_scale(units)
+    source_units = str(units).strip().lower()
+    if isinstance(source, (str, os.PathLike)):
+        path = Path(source)
+        label = label or str(path)
+        if file_type is None:
+            file_type = path.suffix
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            raise InvalidMeshError(f"cannot read {label}: {exc.strerror or exc}", field="file") from exc
+    elif isinstance(source, (bytes, bytearray, memoryview)):
+        data = bytes(source)
+    else:
+        raise InvalidMeshError(f"cannot load a solid from a {type(source).__name__}: pass a path or bytes")
+    label = label or "the uploaded file"
+    ft = str(file_type or "").strip().lower().lstrip(".")
+    if ft not in MESH_TYPES:
+        raise InvalidMeshError(
+            f"{label}: unsupported mesh format {ft or 'without extension'!r}; supported are " + ", ".join(MESH_TYPES),
+            field="file_type",
+        )
+    if max_triangles is not None and ft == "stl" and len(data) >= 84:
+        (count,) = struct.unpack_from("<I", data, 80)
+        if 84 + 50 * count == len(data) and count > max_triangles:
+            raise InvalidMeshError(_too_many(label, count, max_triangles), field="file")
+    raw = _read_raw(data, file_type=ft, max_decoded_bytes=max_decoded_bytes, label=label)
+    if raw.faces is None:
+        raise InvalidMeshError(f"{label} holds points only, no triangles: send a closed mesh", field="file")
+    if max_triangles is not None and len(raw.faces) > max_triangles:
+        raise InvalidMeshError(_too_many(label, len(raw.faces), max_triangles), field="file")
+    _check_finite(raw)
+    _check_plausible_size(raw, to_metres_scale(units), source_units, what=what, extent_range=extent_range)
+    mesh = _clean_mesh(raw, source_units)
+    if not mesh.is_watertight:
+        open_edges = len(trimesh.grouping.group_rows(mesh.edges_sorted, require_count=1))
+        raise InvalidMeshError(
+            f"{label} is not watertight ({open_edges} edges bound a single face, or more than two faces share an "
+            "edge): export it as one closed solid",
+            field="file",
+        )
+    if not mesh.is_winding_consistent:
+        raise InvalidMeshError(
+            f"{label} has faces wound against their neighbours: its outside cannot be told; repair its normals and "
+            "export it again",
+            field="file",
+        )
+    if abs(mesh.volume) <= _MIN_VOLUME_RATIO * float(np.prod(mesh.extents)):
+        _check_volume(mesh, label)  # closed but enclosing nothing (or as much inside out as not)
+    if mesh.volume < 0.0:
+        raise InvalidMeshError(
+            f"{label} is inside out: its normals point inwards (volume {mesh.volume:.3g} m^3); flip its faces and "
+            "export it again",
+            field="file",
+        )
+    return mesh, raw.sha256
+
+
+def _too_many(label: str, count: int, limit: int) -> str:
+    return f"{label} has {count:,} triangles, more than the limit of {limit:,}: decimate it"
+
+
 def read_raw_extents(
     path: str | os.PathLike | bytes, *, file_type: str | None = None, max_decoded_bytes: int = MAX_DECODED_BYTES
 ) -> np.ndarray:
@@ -153,7 +238,11 @@ def read_raw_extents(
 
 
 def _read_raw(
-    source: str | os.PathLike | trimesh.Trimesh | bytes, *, file_type: str | None, max_decoded_bytes: int
+    source: str | os.PathLike | trimesh.Trimesh | bytes,
+    *,
+    file_type: str | None,
+    max_decoded_bytes: int,
+    label: str | None = None,
 ) -> _Raw:
     if isinstance(source, trimesh.Trimesh):
         data = trimesh.exchange.stl.export_stl(source)
@@ -169,10 +258,10 @@ def _read_raw(
             raise InvalidMeshError(
                 "file_type is required for uploaded bytes: one of " + ", ".join(_FILE_TYPES), field="file_type"
             )
-        label, stem = "the uploaded file", "part"
+        label, stem = label or "the uploaded file", "part"
     elif isinstance(source, (str, os.PathLike)):
         path = Path(source)
-        label, stem = str(path), path.stem
+        label, stem = label or str(path), path.stem
         try:
             data = path.read_bytes()
         except OSError as exc:
@@ -373,19 +462,27 @@ def _extents(vertices: np.ndarray) -> np.ndarray:
     return vertices.max(axis=0) - vertices.min(axis=0)
 
 
-def _check_plausible_size(raw: _Raw, scale: float, units: str) -> None:
+def _check_plausible_size(
+    raw: _Raw,
+    scale: float,
+    units: str,
+    *,
+    what: str = "a part",
+    extent_range: tuple[float, float] = (MIN_EXTENT, MAX_EXTENT),
+) -> None:
+    lo, hi = extent_range
     extents_raw = _extents(_used_vertices(raw))
     largest = float(extents_raw.max()) * scale
     if largest <= 0.0:
         raise InvalidMeshError(f"{raw.label} is degenerate: all its points coincide", field="file")
-    if MIN_EXTENT <= largest <= MAX_EXTENT:
+    if lo <= largest <= hi:
         return
-    plausible = [u for u, s in UNIT_SCALE.items() if MIN_EXTENT <= extents_raw.max() * s <= MAX_EXTENT]
+    plausible = [u for u, s in UNIT_SCALE.items() if lo <= extents_raw.max() * s <= hi]
     size = " x ".join(f"{v * scale:.4g}" for v in extents_raw)
     hint = f"it would be plausible in {', '.join(plausible)}" if plausible else "no unit makes it plausible"
     raise InvalidMeshError(
-        f"{raw.label} measures {size} m when read in {units}, which is implausible for a part (the largest extent "
-        f"must be between {MIN_EXTENT * 1e3:g} mm and {MAX_EXTENT:g} m); {hint}. "
+        f"{raw.label} measures {size} m when read in {units}, which is implausible for {what} (the largest extent "
+        f"must be between {lo * 1e3:g} mm and {hi:g} m); {hint}. "
         f"Extents under each unit: {extents_under_each_unit(extents_raw)}",
         field="units",
     )
@@ -409,6 +506,32 @@ def _check_not_flat(vertices: np.ndarray, label: str) -> None:
 
 
 def _mesh_part(raw: _Raw, scale: float, name: str, units: str) -> Part:
+    mesh = _clean_mesh(raw, units)
+    warnings: list[str] = []
+    watertight = bool(mesh.is_watertight)
+    if watertight:
+        trimesh.repair.fix_normals(mesh, multibody=False)
+        if mesh.volume < 0.0:
+            mesh.invert()
+        _check_volume(mesh, raw.label)
+    else:
+        trimesh.repair.fix_winding(mesh)
+        warnings.append(_NOT_WATERTIGHT)
+    extents = tuple(float(v) for v in mesh.extents)
+    return Part(name, mesh, None, None, units, raw.sha256, watertight, extents, tuple(warnings))
+
+
+def _check_volume(mesh: trimesh.Trimesh, label: str) -> None:
+    box = float(np.prod(mesh.extents))
+    if not mesh.volume > _MIN_VOLUME_RATIO * box:
+        raise InvalidMeshError(
+            f"{label} is closed but encloses no volume ({mesh.volume:.3g} m^3): it is degenerate", field="file"
+        )
+
+
+def _clean_mesh(raw: _Raw, units: str) -> trimesh.Trimesh:
+    """The raw triangles in metres, vertices merged on position and faces cleaned (module docstring); refuses a mesh
+    without area or a flat one. Winding as given."""
     vertices = to_metres(raw.vertices, units)
     mesh = trimesh.Trimesh(vertices, raw.faces, process=False, validate=False)
     mesh.merge_vertices(merge_tex=True, merge_norm=True)
@@ -422,24 +545,7 @@ def _mesh_part(raw: _Raw, scale: float, name: str, units: str) -> Part:
     if len(mesh.faces) == 0 or mesh.area <= 0.0:
         raise InvalidMeshError(f"{raw.label} has no triangles with a non-zero area", field="file")
     _check_not_flat(np.asarray(mesh.vertices), raw.label)
-
-    warnings: list[str] = []
-    watertight = bool(mesh.is_watertight)
-    if watertight:
-        trimesh.repair.fix_normals(mesh, multibody=False)
-        if mesh.volume < 0.0:
-            mesh.invert()
-        box = float(np.prod(mesh.extents))
-        if not mesh.volume > _MIN_VOLUME_RATIO * box:
-            raise InvalidMeshError(
-                f"{raw.label} is closed but encloses no volume ({mesh.volume:.3g} m^3): it is degenerate",
-                field="file",
-            )
-    else:
-        trimesh.repair.fix_winding(mesh)
-        warnings.append(_NOT_WATERTIGHT)
-    extents = tuple(float(v) for v in mesh.extents)
-    return Part(name, mesh, None, None, units, raw.sha256, watertight, extents, tuple(warnings))
+    return mesh
 
 
 def _clean_faces(faces: np.ndarray) -> np.ndarray:

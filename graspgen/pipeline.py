@@ -541,6 +541,7 @@ def recluster(
     density: float | None = None,
     mesh: str | os.PathLike | trimesh.Trimesh | Part | None = None,
     units: str | None = None,
+    gripper: GripperSpec | None = None,
     options: QualityOptions | None = None,
     **quality: Any,
 ) -> GraspSet:
@@ -548,7 +549,9 @@ def recluster(
 
     The quality options (select, validate, repair_limit, sim_workers: the fields of `QualityOptions`) as in
     generate(), as keywords or a ready `options=`; validation, and quality scoring of candidates stored without
-    quality terms, need the part: `mesh` (a Part, a mesh in metres, or a path with `units`).
+    quality terms, need the part: `mesh` (a Part, a mesh in metres, or a path with `units`). `gripper`: the spec the
+    set was made with, required when it has geometry (the export names its mesh files and their digests, not their
+    contents); its to_dict() must be the export's `gripper`.
     """
     from .export import load_candidates
 
@@ -556,7 +559,12 @@ def recluster(
     (options,) = from_keywords("recluster", quality, (QualityOptions, options))
     t_all = time.perf_counter()
     cands = candidates if isinstance(candidates, Candidates) else load_candidates(candidates)
-    spec = GripperSpec.from_dict(previous_export["gripper"])
+    if gripper is None:
+        spec = GripperSpec.from_dict(previous_export["gripper"])
+    elif gripper.to_dict() == previous_export["gripper"]:
+        spec = gripper
+    else:
+        raise InvalidParameterError("gripper is not the spec the grasp set was made with", field="gripper")
     old = dict(previous_export["params"])
     mu = float(old.get("friction") or spec.friction)
     # the export carries the mass the run resolved beside the density it may have come from

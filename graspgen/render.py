@@ -96,7 +96,7 @@ def gripper_triangles(spec: GripperSpec, T_object_grasp: np.ndarray, width: floa
     return np.vstack(verts), np.vstack(faces).astype(np.int64)
 
 
-def _layers(mesh: trimesh.Trimesh, export: dict[str, Any]):
+def _layers(mesh: trimesh.Trimesh, export: dict[str, Any], gripper: GripperSpec | None = None):
     """Two layers of triangles, the part and the grippers: each (vertices (v, 3), faces (f, 3), colours (f, 3))."""
     part = (
         np.asarray(mesh.vertices, dtype=np.float64),
@@ -106,7 +106,7 @@ def _layers(mesh: trimesh.Trimesh, export: dict[str, Any]):
     verts, faces, cols = [np.zeros((0, 3))], [np.zeros((0, 3), dtype=np.int64)], [np.zeros((0, 3))]
     grasps = export.get("grasps") or []
     if grasps:
-        spec = GripperSpec.from_dict(export["gripper"])
+        spec = gripper if gripper is not None else GripperSpec.from_dict(export["gripper"])
         palette = cluster_colours(np.array([g["cluster"][0] for g in grasps])) / 255.0
         offset = 0
         for g, colour in zip(grasps, palette, strict=True):
@@ -164,12 +164,19 @@ def _layer(verts, faces, base, centre, radius, view, W, H) -> tuple[np.ndarray, 
     return zbuf, img
 
 
-def render_image(mesh: trimesh.Trimesh, export: dict[str, Any], *, size: tuple[int, int] = DEFAULT_SIZE) -> np.ndarray:
-    """The picture as an (H, W, 3) uint8 array: the four `VIEWS` in a 2 x 2 grid, each labelled."""
+def render_image(
+    mesh: trimesh.Trimesh,
+    export: dict[str, Any],
+    *,
+    size: tuple[int, int] = DEFAULT_SIZE,
+    gripper: GripperSpec | None = None,
+) -> np.ndarray:
+    """The picture as an (H, W, 3) uint8 array: the four `VIEWS` in a 2 x 2 grid, each labelled. `gripper`: the
+    export's gripper spec, needed when it has geometry (the export names its mesh files, it does not hold them)."""
     from PIL import Image, ImageDraw
 
     W, H = _check_size(size)
-    part, grippers = _layers(mesh, export)
+    part, grippers = _layers(mesh, export, gripper)
     verts = np.vstack([part[0], grippers[0]])
     lo, hi = verts.min(axis=0), verts.max(axis=0)
     centre = (lo + hi) / 2
@@ -200,12 +207,20 @@ def render_image(mesh: trimesh.Trimesh, export: dict[str, Any], *, size: tuple[i
     return np.asarray(image)
 
 
-def render_grasp_set(mesh: trimesh.Trimesh, export: dict[str, Any], *, size: tuple[int, int] = DEFAULT_SIZE) -> bytes:
-    """PNG bytes of `export` (a grasp_set/1 dict) drawn on `mesh` (metres, the object's model frame)."""
+def render_grasp_set(
+    mesh: trimesh.Trimesh,
+    export: dict[str, Any],
+    *,
+    size: tuple[int, int] = DEFAULT_SIZE,
+    gripper: GripperSpec | None = None,
+) -> bytes:
+    """PNG bytes of `export` (a grasp_set/1 dict) drawn on `mesh` (metres, the object's model frame); `gripper` as
+    for render_image."""
     from PIL import Image
 
     buf = io.BytesIO()
-    Image.fromarray(render_image(mesh, export, size=size), "RGB").save(buf, format="PNG", optimize=False)
+    image = render_image(mesh, export, size=size, gripper=gripper)
+    Image.fromarray(image, "RGB").save(buf, format="PNG", optimize=False)
     return buf.getvalue()
 
 

@@ -10,6 +10,7 @@ from fastapi import FastAPI
 from fastapi.openapi.utils import get_openapi
 from fastapi.routing import APIRoute
 
+from graspgen.gripper_geometry import MESH_ROLES
 from services.common.db import Database, redacted_url
 from services.common.settings import Settings, get_settings
 from services.common.storage import make_storage
@@ -105,6 +106,8 @@ def create_app(
         BodyLimitMiddleware,
         default_limit=settings.max_json_bytes,
         limits={("POST", "/v1/objects"): settings.max_upload_bytes + MULTIPART_OVERHEAD},
+        # a gripper's mesh files: finger, finger_left and body, each at most max_upload_bytes
+        multipart_limits={("POST", "/v1/grippers"): len(MESH_ROLES) * settings.max_upload_bytes + MULTIPART_OVERHEAD},
     )
 
     def openapi() -> dict:

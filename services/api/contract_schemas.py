@@ -23,6 +23,8 @@ from graspgen.pick import DEFAULT_LIMIT, DEFAULT_PREGRASP_DISTANCE, MAX_LIMIT, M
 
 __all__ = [
     "GripperSpec",
+    "GripperGeometry",
+    "GripperPad",
     "JobParams",
     "job_params_model",
     "GraspSetExport",
@@ -51,19 +53,59 @@ _IDENTITY = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [
 
 
 # -- gripper spec -----------------------------------------------------------------------------------------------------
+class GripperPad(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    width: float = Field(gt=0, le=2, description="pad extent along Y, m")
+    depth: float = Field(gt=0, le=2, description="pad extent along Z, m")
+
+
+class GripperGeometry(BaseModel):
+    """Finger and body meshes from CAD (CONTRACT.md "Gripper geometry from CAD"; docs/API.md has the frames).
+    Each value is a file name: relative to the spec file (CLI, Python), or the name of a multipart file part (HTTP).
+    Files are STL, OBJ, PLY, OFF or GLB, watertight with outward normals, at most 200,000 triangles each."""
+
+    model_config = ConfigDict(extra="forbid")
+    units: Literal["mm", "cm", "m", "in"] = Field(description="the unit of the mesh files")
+    finger: str = Field(
+        description="the +X finger in its finger frame: origin at the pad's contact point, inner face at x = 0 "
+        "looking along -X, the finger at x >= 0, +Z the approach",
+        examples=["finger.stl"],
+    )
+    finger_left: str | None = Field(
+        None, description="the -X finger in its own finger frame (same convention); default: the finger's mesh"
+    )
+    body: str | None = Field(
+        None, description="all that does not move with the fingers (housing, adapter, flange), in the grasp frame"
+    )
+    pad: GripperPad | None = Field(
+        None, description="the contact pad on the inner face, m; default: the finger's extent at its inner face"
+    )
+    sha256: dict[str, str] | None = Field(
+        None,
+        description="file name -> hex sha256; stored specs and exports carry it; when given, the files must match",
+    )
+
+
 class GripperSpec(BaseModel):
     """A parallel-jaw gripper (CONTRACT.md gripper spec). All lengths in metres, in the grasp frame: X closing axis,
-    Y pad width, Z approach (the palm lies at -Z). Unknown fields are refused."""
+    Y pad width, Z approach (the palm lies at -Z). Either the box fields (finger_width, finger_depth,
+    finger_thickness, optional palm_depth, palm_width) or `geometry`, never both. Unknown fields are refused."""
 
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [dict(EXAMPLE_GRIPPER)]})
     name: str = Field(pattern=SLUG, description="slug", examples=["pgn-80"])
+    kind: Literal["parallel"] | None = Field(None, description="the default kind")
     stroke: float = Field(gt=0, le=2, description="maximum opening between the finger pads, m")
     min_width: float | None = Field(0.0, ge=0, description="smallest width the gripper can hold, m (< stroke)")
-    finger_width: float = Field(gt=0, le=2, description="pad extent along Y, m")
-    finger_depth: float = Field(gt=0, le=2, description="pad extent along Z, m; the contact sits at its centre")
-    finger_thickness: float = Field(gt=0, le=2, description="finger extent along X, m")
+    finger_width: float | None = Field(None, gt=0, le=2, description="box spec (required there): pad extent along Y, m")
+    finger_depth: float | None = Field(
+        None, gt=0, le=2, description="box spec (required there): pad extent along Z, m; the contact sits at its centre"
+    )
+    finger_thickness: float | None = Field(
+        None, gt=0, le=2, description="box spec (required there): finger extent along X, m"
+    )
     palm_depth: float | None = Field(0.0, ge=0, le=2, description="box behind the fingers along -Z, m; 0 = no palm")
     palm_width: float | None = Field(None, gt=0, le=2, description="palm extent along Y, m; default finger_width")
+    geometry: GripperGeometry | None = Field(None, description="finger and body meshes instead of the box fields")
     friction: float = Field(gt=0, description="Coulomb coefficient pad/part (a job's `friction` overrides it)")
     pregrasp_clearance: float = Field(
         ge=0, description="extra opening before closing, m: open width = min(width + this, stroke)"

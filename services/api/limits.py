@@ -1,7 +1,8 @@
 """Request body limits enforced while the body streams in, answered with a problem+json 413.
 
 A declared Content-Length above the limit is refused before any byte is read; a chunked or lying body is cut off as
-soon as the running count passes the limit. The upload route gets a larger limit (the file plus multipart overhead).
+soon as the running count passes the limit. The upload routes get larger limits (the files plus multipart overhead):
+`POST /v1/objects` for any body, `POST /v1/grippers` for a multipart body only (its JSON body keeps the default).
 """
 
 from __future__ import annotations
@@ -24,18 +25,31 @@ class BodyTooLarge(HTTPException):  # noqa: N818 - an HTTP status, handled as a 
 
 
 class BodyLimitMiddleware:
-    def __init__(self, app: ASGIApp, *, default_limit: int, limits: dict[tuple[str, str], int]) -> None:
+    def __init__(
+        self,
+        app: ASGIApp,
+        *,
+        default_limit: int,
+        limits: dict[tuple[str, str], int],
+        multipart_limits: dict[tuple[str, str], int] | None = None,
+    ) -> None:
         self.app = app
         self.default_limit = default_limit
         self.limits = limits
+        #: (method, path) -> the limit of a multipart/form-data body there (other bodies: `limits` or the default)
+        self.multipart_limits = multipart_limits or {}
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
         path = scope.get("path", "").rstrip("/") or "/"
-        limit = self.limits.get((scope.get("method", "GET"), path), self.default_limit)
-        declared = Headers(scope=scope).get("content-length")
+        key = (scope.get("method", "GET"), path)
+        headers = Headers(scope=scope)
+        limit = self.limits.get(key, self.default_limit)
+        if key in self.multipart_limits and headers.get("content-type", "").lower().startswith("multipart/form-data"):
+            limit = self.multipart_limits[key]
+        declared = headers.get("content-length")
         if declared is not None and declared.isdigit() and int(declared) > limit:
             response = problem_response(
                 413,

@@ -99,6 +99,12 @@ class ObjectPage(Page):
 _SPEC_DOC = WithJsonSchema({"allOf": [{"$ref": "#/components/schemas/GripperSpec"}]})
 
 
+class GripperFileOut(BaseModel):
+    path: str = Field(description="the file name as the spec's geometry gives it")
+    sha256: str
+    link: str = Field(description="GET it here")
+
+
 class GripperVersionOut(BaseModel):
     model_config = ConfigDict(
         json_schema_extra={
@@ -114,6 +120,9 @@ class GripperVersionOut(BaseModel):
     name: str
     version: int
     spec: Annotated[dict[str, Any], _SPEC_DOC]
+    files: list[GripperFileOut] = Field(
+        default_factory=list, description="a spec with geometry: its mesh files, by name; a box spec: none"
+    )
     created_at: datetime
     links: dict[str, str]
 

@@ -39,10 +39,12 @@ def check_generate(
     spec: dict[str, Any],
     params: dict[str, Any],
     load_part: Callable[[], Any],
+    load_gripper: Callable[[], Any] | None = None,
 ) -> MemoryEstimate:
     """The estimate of a generate job with these (effective) params, or `MemoryLimitError` when it exceeds the
     budget. `params` is the job's stored params dict (graspgen.params.from_job). `load_part()` returns the graspgen
-    Part; it is called only when no probe of this part is cached."""
+    Part, `load_gripper()` the GripperSpec of `spec` (needed for a spec with geometry, whose meshes the stored dict
+    only names; default: `spec` itself); both are called only when no probe of this part and gripper is cached."""
     run, _ = from_job(params)
     key = _key(part_sha256, units, spec, run)
     with _lock:
@@ -50,7 +52,8 @@ def check_generate(
         if pr is not None:
             _probes.move_to_end(key)
     if pr is None:
-        pr = probe(load_part(), spec, run)
+        gripper = load_gripper() if load_gripper is not None else spec
+        pr = probe(load_part(), gripper, run)
         with _lock:
             _probes[key] = pr
             while len(_probes) > _MAX_PROBES:

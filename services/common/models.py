@@ -1,6 +1,6 @@
 """The service's tables (SQLAlchemy 2 typed models). Lengths are metres, as everywhere in graspgen.
 
-objects 1-n object_versions      grippers 1-n gripper_versions
+objects 1-n object_versions      grippers 1-n gripper_versions 1-n gripper_files (the meshes of a spec with geometry)
 jobs (of a kind registered in services/jobkinds; a bulk job is the parent of its items)
 grasp_sets: one immutable version per object version x gripper version x parameters, numbered per
             (object, gripper) pair; grasps: one row per exported grasp, so the catalogue is queryable without files.
@@ -38,6 +38,7 @@ __all__ = [
     "ObjectVersion",
     "Gripper",
     "GripperVersion",
+    "GripperFile",
     "Job",
     "GraspSet",
     "Grasp",
@@ -151,9 +152,27 @@ class GripperVersion(_Timestamps, Base):
     id: Mapped[int] = mapped_column(primary_key=True)
     gripper_id: Mapped[int] = mapped_column(ForeignKey("grippers.id", ondelete="CASCADE"))
     version: Mapped[int]
-    #: the validated spec (CONTRACT.md gripper spec), as GripperSpec.to_dict() gives it
+    #: the validated spec (CONTRACT.md gripper spec), as GripperSpec.to_dict() gives it (with geometry: each file's
+    #: sha256 in spec.geometry.sha256, so the spec's digest changes when a file does)
     spec: Mapped[dict[str, Any]]
     spec_sha256: Mapped[str] = mapped_column(String(64))
+
+
+class GripperFile(Base):
+    """One mesh file of a gripper version whose spec has `geometry`: the path the spec names, stored
+    content-addressed (its key is storage.blob_key(sha256)). Written with the version, never changed."""
+
+    __tablename__ = "gripper_files"
+    __table_args__ = (UniqueConstraint("gripper_version_id", "path"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    gripper_version_id: Mapped[int] = mapped_column(ForeignKey("gripper_versions.id", ondelete="CASCADE"))
+    #: the file name as the spec's geometry gives it (a relative path)
+    path: Mapped[str] = mapped_column(String(255))
+    sha256: Mapped[str] = mapped_column(String(64))
+    size_bytes: Mapped[int] = mapped_column(BigInteger)
+    #: storage key of the bytes (content-addressed)
+    file_key: Mapped[str] = mapped_column(String(200))
 
 
 class Job(_Timestamps, Base):

@@ -12,6 +12,7 @@ from sqlalchemy.orm import Session
 from graspgen.errors import InvalidParameterError
 from graspgen.params import Params, from_job
 from services.api.schemas import ID_MAX, PARAMS_DOC, NoNulModel
+from services.common.grippers import file_digests
 from services.common.models import GraspSet as GraspSetRow
 
 from .kind import JobKind, RunContext
@@ -90,6 +91,8 @@ def run(ctx: RunContext) -> GraspSet:
     return graspgen.recluster(
         str(npz),
         previous,
+        # a spec with geometry: with its meshes (the export holds only their digests); a box spec: from the export
+        gripper=ctx.gripper() if file_digests(inp.spec) else None,
         k1=params.k1,
         k2=params.k2,
         seed=params.seed,

@@ -104,7 +104,7 @@ def run(
     loaded = ctx.load_part(ctx.download_part())  # MemoryLimitError: the job fails, never redelivered
     return graspgen.generate(
         loaded,
-        inp.spec,
+        ctx.gripper(),  # with its meshes when the spec has geometry
         units=inp.units,
         params=params,
         options=options,

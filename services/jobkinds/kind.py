@@ -104,6 +104,9 @@ class RunContext:
     progress: Callable[[str, float], None]
     #: the part file at this path, loaded once after the job's peak memory was checked against the worker's budget
     load_part: Callable[[Path], Any]
+    #: the job's gripper version as graspgen.GripperSpec, loaded once: a spec with geometry with its mesh files
+    #: from storage (services/common/grippers.py)
+    gripper: Callable[[], Any]
 
     def download_part(self) -> Path:
         """The job's part file in `tmp`."""

@@ -8,6 +8,7 @@ makes them visible commits, so a reader never sees a grasp set whose files are m
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import socket
@@ -26,11 +27,13 @@ from sqlalchemy.orm import Session
 
 from services.common import catalogue, jobs
 from services.common.db import Database, is_unavailable
+from services.common.grippers import stored_gripper_spec
 from services.common.models import (
     TERMINAL_STATES,
     Grasp,
     GraspSet,
     Gripper,
+    GripperFile,
     GripperVersion,
     Job,
     ObjectModel,
@@ -230,6 +233,9 @@ class JobRunner:
         if kind is None:
             raise ValueError(f"unknown job kind {inp.kind!r}")
         progress = _Progress(self, inp, kind)
+        gripper = functools.cache(
+            lambda: stored_gripper_spec(self.storage, inp.spec, max_decoded_bytes=self.settings.max_decoded_bytes)
+        )
         rrd = tmp / "run.rrd"
         rec = rr.RecordingStream("graspgen", recording_id=str(inp.job_id))
         rec.save(rrd)
@@ -243,7 +249,8 @@ class JobRunner:
                     tmp=tmp,
                     recording=rec,
                     progress=progress,
-                    load_part=lambda path: self._check_memory(inp, path),
+                    load_part=lambda path: self._check_memory(inp, path, gripper),
+                    gripper=gripper,
                 )
             )
             progress("export", 1.0)
@@ -262,8 +269,9 @@ class JobRunner:
             rec.disconnect()  # finalises the .rrd (footer) now rather than at garbage collection
         return export_bytes, gs.stats, gs.grasps, candidates, rrd
 
-    def _check_memory(self, inp: JobInputs, path: Path):  # type: ignore[no-untyped-def]
-        """The part, loaded once, after the job's estimated peak memory was checked against this worker's budget."""
+    def _check_memory(self, inp: JobInputs, path: Path, gripper: Callable[[], Any]):  # type: ignore[no-untyped-def]
+        """The part, loaded once, after the job's estimated peak memory was checked against this worker's budget
+        (with the job's gripper, `gripper()`, when no probe of the part and gripper is cached)."""
         from graspgen.parts import load_part
         from services.common.memory_guard import check_generate
 
@@ -277,6 +285,7 @@ class JobRunner:
             spec=inp.spec,
             params=inp.params,
             load_part=lambda: part,
+            load_gripper=gripper,
         )
         return part
 
@@ -393,6 +402,7 @@ class JobRunner:
                 for column in (GraspSet.export_key, GraspSet.candidates_key, GraspSet.recording_key):
                     used.update(s.execute(select(column).where(column.in_(mine))).scalars())
                 used.update(s.execute(select(ObjectVersion.file_key).where(ObjectVersion.file_key.in_(mine))).scalars())
+                used.update(s.execute(select(GripperFile.file_key).where(GripperFile.file_key.in_(mine))).scalars())
                 for key in sorted(mine - used):
                     self.storage.delete(key)
         except Exception:

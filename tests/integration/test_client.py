@@ -151,3 +151,28 @@ def test_the_client_needs_no_token_to_fail_clearly(embedded_stack):
     with Client(url, None) as gg, pytest.raises(ProblemError) as err:
         gg.object("anything")
     assert err.value.status == 401 and err.value.problem["code"] == "unauthorized"
+
+
+def test_a_gripper_with_mesh_files_through_the_client(embedded_stack, tmp_path):
+    """upload_gripper sends the spec and the files it names; the same files again give the same version; a job on
+    the embedded worker runs with the meshes; the files come back as uploaded."""
+    from pathlib import Path
+
+    examples = Path(__file__).resolve().parents[2] / "examples"
+    url, token = embedded_stack
+    with Client(url, token, timeout=300) as gg:  # the first submission of a process may compile the memory probe
+        first = gg.upload_gripper(examples / "pgn-80-vgroove.json")
+        assert first["version"] >= 1 and len(first["files"]) == 2
+        assert gg.upload_gripper(examples / "pgn-80-vgroove.json")["version"] == first["version"]
+        finger = gg.gripper_file("pgn-80-vgroove", first["version"], "pgn-80-vgroove/finger.stl")
+        assert finger == (examples / "pgn-80-vgroove" / "finger.stl").read_bytes()
+        spec = GripperSpec.load(examples / "pgn-80-vgroove.json")
+        files = {"pgn-80-vgroove/finger.stl": finger, "pgn-80-vgroove/body.stl": examples / "pgn-80-vgroove/body.stl"}
+        assert gg.create_gripper(spec, files=files)["version"] == first["version"]  # a GripperSpec with its files
+        with pytest.raises(ProblemError) as e:
+            gg.create_gripper({**spec.to_dict(), "name": slug("cadc")}, files={**files, "extra.stl": finger})
+        assert e.value.status == 422 and e.value.problem["field"] == "extra.stl"
+        obj = slug("cyl")
+        gg.upload_object(cylinder_stl(), name=obj, units="mm", filename="cyl.stl")
+        job = gg.wait(gg.submit_job(obj, "pgn-80-vgroove", params=SMALL), timeout=300)
+        assert gg.grasp_set(job["grasp_set"])["gripper"] == first["spec"]

@@ -123,6 +123,7 @@ def submit_job(
 def _check_memory(session: Session, settings: Settings, storage: Storage, resolved: dict[str, Any]) -> None:
     from graspgen.memory import MemoryLimitError
     from graspgen.parts import load_part
+    from services.common.grippers import stored_gripper_spec
     from services.common.memory_guard import check_generate, problem_extra
 
     ov = session.get(ObjectVersion, resolved["object_version_id"])
@@ -140,10 +141,11 @@ def _check_memory(session: Session, settings: Settings, storage: Storage, resolv
             load_part=lambda: load_part(
                 storage.get_bytes(key), units=units, file_type=fmt, max_decoded_bytes=settings.max_decoded_bytes
             ),  # only when no probe of this part, gripper and parameters is cached
+            load_gripper=lambda: stored_gripper_spec(storage, spec, max_decoded_bytes=settings.max_decoded_bytes),
         )
     except (OSError, StorageError) as exc:
         # the part's file is unreadable here: the worker, which must read it to run the job, checks the memory
-        log.warning("memory check skipped at submission: object blob %s unreadable (%s)", key, type(exc).__name__)
+        log.warning("memory check skipped at submission: a part or gripper file is unreadable (%s)", type(exc).__name__)
     except MemoryLimitError as exc:
         extra = problem_extra(exc)
         raise ApiError(422, exc.code, exc.message, title="Job too large for the worker's memory", **extra) from exc

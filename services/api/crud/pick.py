@@ -16,8 +16,8 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from graspgen.export import load_candidates
-from graspgen.gripper import GripperSpec
 from graspgen.pick import DEFAULT_LIMIT, DEFAULT_PREGRASP_DISTANCE, PickIndex, PickQuery
+from services.common.grippers import stored_gripper_spec
 from services.common.models import GraspSet, GripperVersion
 
 from ..cache import SizedLRU
@@ -72,18 +72,14 @@ def _index(state: Any, ref: PickRef) -> PickIndex:
         data = state.storage.get_bytes(ref.candidates_key)
     except FileNotFoundError:
         raise ApiError(503, "artifact-missing", "the candidate NPZ is missing from storage") from None
-    index = PickIndex.build(load_candidates(io.BytesIO(data)), GripperSpec.from_dict(_spec(ref.gripper_spec)))
+    try:
+        # a spec with geometry is loaded with its meshes; a box spec keeps only the fields this graspgen knows
+        gripper = stored_gripper_spec(state.storage, ref.gripper_spec)
+    except FileNotFoundError:
+        raise ApiError(503, "artifact-missing", "a mesh file of the gripper is missing from storage") from None
+    index = PickIndex.build(load_candidates(io.BytesIO(data)), gripper)
     cache.put(ref.id, index, index.nbytes)
     return index
-
-
-def _spec(spec: dict[str, Any]) -> dict[str, Any]:
-    # specs stored before a field existed in GripperSpec carry none of it; fields the library does not know (yet)
-    # would be refused by from_dict, and only the geometry matters here
-    from dataclasses import fields
-
-    known = {f.name for f in fields(GripperSpec)}
-    return {k: v for k, v in spec.items() if k in known}
 
 
 def run_pick(state: Any, body: dict[str, Any]) -> dict[str, Any]:

@@ -47,10 +47,17 @@ def get_version(session: Session, kind: Versioned, name: str, version: int) -> A
 
 
 def add_version(
-    session: Session, kind: Versioned, name: str, columns: dict[str, Any], *, existing: Callable[[], Any]
+    session: Session,
+    kind: Versioned,
+    name: str,
+    columns: dict[str, Any],
+    *,
+    existing: Callable[[], Any],
+    children: Callable[[Any], list[Any]] = lambda version: [],
 ) -> tuple[Any, bool]:
     """Commit the next version of `name` (created with it when new) with `columns`, and refresh the catalogue (sets
-    for the older version are no longer "the newest"; a released one turns stale). Returns (version, True), or
+    for the older version are no longer "the newest"; a released one turns stale). `children(version)` gives rows
+    that belong to the new version (a gripper's files), added in the same transaction. Returns (version, True), or
     (the version `existing()` finds, False) when a concurrent writer committed the same content first."""
     for _ in range(_ATTEMPTS):
         try:
@@ -65,6 +72,8 @@ def add_version(
             v = kind.versions(**{f"{kind.what}_id": row.id}, version=(latest or 0) + 1, **columns)
             row.updated_at = utcnow()
             session.add(v)
+            session.flush()
+            session.add_all(children(v))
             session.flush()
             catalogue.refresh(session, **{f"{kind.what}_id": row.id})
             session.commit()
