@@ -21,7 +21,7 @@ from .http import BlobCache, HeadMiddleware
 from .limits import MULTIPART_OVERHEAD, BodyLimitMiddleware
 from .openapi_docs import document_contract
 from .problems import install_problem_handlers, problem_schema
-from .routers import grasp_sets, grippers, health, jobs, objects, pick, previews
+from .routers import grasp_sets, grippers, health, jobs, objects, pairs, pick, previews
 
 __all__ = ["create_app"]
 
@@ -93,6 +93,7 @@ def create_app(
         grippers.router,
         jobs.router,
         grasp_sets.router,
+        pairs.router,
         previews.router,
         pick.router,
         health.router,
