@@ -16,7 +16,7 @@ from services.common.storage import make_storage
 from services.common.tokens import TokenStore
 from services.worker.dispatch import Dispatcher, EmbeddedDispatcher, make_dispatcher
 
-from . import observability
+from . import observability, ui
 from .http import BlobCache, HeadMiddleware
 from .limits import MULTIPART_OVERHEAD, BodyLimitMiddleware
 from .openapi_docs import document_contract
@@ -100,6 +100,7 @@ def create_app(
     ):
         app.include_router(r)
     previews.install(app, settings)
+    ui.install(app)  # the review page at /ui/ (issue 34)
     observability.install(app, settings, dispatcher)  # request ids, /metrics, rate limits (issue 16)
     app.add_middleware(HeadMiddleware)  # outside request ids, metrics and rate limits: they count a HEAD as a GET
     app.add_middleware(
