@@ -135,12 +135,12 @@ def test_set_page_draws_the_part_and_the_gripper_and_shows_a_grasps_numbers(serv
     canvas = page.locator(".viewer canvas")
     with_grippers = canvas.screenshot()
     assert drawn_share(with_grippers) > 0.02, "the 3D view is blank"
-    page.get_by_label("grippers").uncheck()
+    page.get_by_label("Grippers").select_option("selected")
     page.wait_for_timeout(200)
     part_only = canvas.screenshot()
     assert drawn_share(part_only) > 0.01, "the part is not drawn"
     assert part_only != with_grippers, "hiding the grippers changed nothing: they were not drawn"
-    page.get_by_label("grippers").check()
+    page.get_by_label("Grippers").select_option("all")
 
     export = httpx.get(
         f"{served['url']}/v1/grasp-sets/{set_id}", headers={"Authorization": f"Bearer {served['tokens']['reader']}"}
@@ -157,9 +157,19 @@ def test_set_page_draws_the_part_and_the_gripper_and_shows_a_grasps_numbers(serv
     assert f"{g['friction_margin_deg']:.2f}°" in text
     assert "quaternion xyzw" in text and f"{g['pose'][0][3]:.5f}" in text
     assert f"{len(g['free_rolls_deg'])}: " in text
+    # a click on a gripper in the view selects it: try points around the centre, where the grippers are
+    page.evaluate("location.hash = '#/'")
+    open_set(page, set_id)
+    box = canvas.bounding_box()
+    for dx, dy in [(0, 0), (20, 0), (-20, 0), (0, 20), (0, -20), (40, 40), (-40, -40), (40, -40), (-40, 40)]:
+        canvas.click(position={"x": box["width"] / 2 + dx, "y": box["height"] / 2 + dy})
+        if selected.get_by_text(re.compile(rf"Grasp \d+ of {n}")).count():
+            break
+    assert selected.get_by_text(re.compile(rf"Grasp \d+ of {n}")).count() == 1, "no click on the view selected a grasp"
     funnel = page.locator("table.funnel").inner_text()
     assert "outside" in funnel and f"{export['stats']['pairs_total']:,}" in funnel
     # the canvas is keyboard reachable: → selects the next grasp
+    page.get_by_role("button", name="Grasp 2", exact=True).click()
     canvas.focus()
     page.keyboard.press("ArrowRight")
     selected.get_by_text(f"Grasp 3 of {n}").wait_for()
@@ -241,6 +251,76 @@ def test_jobs_show_state_problem_and_the_set(served, browser_page):
     link = page.locator("table.jobs").get_by_role("link", name=f"set {served['sets'][1]}")
     link.click()
     page.locator(".viewer[data-state=complete]").wait_for(timeout=60_000)
+
+
+def _box_mesh_stl(extents_mm: tuple[float, float, float], offset_mm: tuple[float, float, float]) -> bytes:
+    import trimesh
+
+    mesh = trimesh.creation.box(extents=extents_mm)
+    mesh.apply_translation(offset_mm)
+    return mesh.export(file_type="stl")
+
+
+def _draws_a_set_of(served, browser_page, spec: dict, files: dict[str, bytes] | None, name: str) -> None:
+    """Register `spec` (multipart with `files` when given), run a small job with it and check the set page draws it;
+    skip, saying why, when the server does not take such a gripper or cannot run a job with it yet."""
+    writer = {"Authorization": f"Bearer {served['tokens']['writer']}"}
+    with httpx.Client(base_url=served["url"], headers=writer, timeout=60) as c:
+        if files:
+            r = c.post(
+                "/v1/grippers",
+                data={"spec": json.dumps(spec)},
+                files={k: (k, v, "model/stl") for k, v in files.items()},
+            )
+        else:
+            r = c.post("/v1/grippers", json=spec)
+        if r.status_code not in (200, 201):
+            pytest.skip(f"this server does not accept a {name} gripper yet ({r.status_code}: {r.text[:200]})")
+        job = c.post("/v1/jobs", json={"object": "ui-box", "gripper": spec["name"], "params": SMALL}).json()
+        done = _wait(c, job["id"])
+        if done["state"] != "succeeded" or not done.get("grasp_set"):
+            pytest.skip(f"this server cannot run a job with a {name} gripper yet: {done.get('error')}")
+    page = browser_page["page"]
+    open_set(page, done["grasp_set"])
+    assert drawn_share(page.locator(".viewer canvas").screenshot()) > 0.02
+    assert page.locator(".status.error").count() == 0, page.locator(".status.error").first.inner_text()
+    page.get_by_role("button", name="Grasp 1", exact=True).click()
+    page.locator("section.selected").get_by_text("Grasp 1 of").wait_for()
+    shot(page, f"11-{name.lower()}-gripper")
+
+
+def test_a_gripper_with_cad_fingers_is_drawn_from_its_meshes(served, browser_page):
+    spec = {
+        "name": "ui-cad",
+        "kind": "parallel",
+        "stroke": 0.08,
+        "min_width": 0.0,
+        "friction": 0.5,
+        "pregrasp_clearance": 0.02,
+        "grip_force": 20.0,
+        # the contract's boxes as meshes, in mm: the finger's pad centre at its frame's origin, body behind
+        "geometry": {"units": "mm", "finger": "finger.stl", "body": "body.stl"},
+    }
+    files = {
+        "finger.stl": _box_mesh_stl((10.0, 20.0, 30.0), (5.0, 0.0, 0.0)),
+        "body.stl": _box_mesh_stl((100.0, 20.0, 20.0), (0.0, 0.0, -25.0)),
+    }
+    _draws_a_set_of(served, browser_page, spec, files, "CAD-finger")
+
+
+def test_a_suction_cup_is_drawn_as_cup_and_tool(served, browser_page):
+    spec = {
+        "name": "ui-cup",
+        "kind": "suction",
+        "cup_radius": 0.008,
+        "cup_height": 0.01,
+        "max_strain": 0.1,
+        "vacuum": 60000,
+        "friction": 0.5,
+        "tool": {"radius": 0.006, "length": 0.08},
+        "pregrasp_clearance": 0.03,
+    }
+    _draws_a_set_of(served, browser_page, spec, None, "suction")
 
 
 def test_every_request_stayed_on_the_origin_and_the_console_is_clean(served, browser_page):

@@ -121,7 +121,7 @@ export class GraspViewer {
       ? new THREE.Points(geometry, new THREE.PointsMaterial({ color: 0x6b7280, size: 2, sizeAttenuation: false }))
       : new THREE.Mesh(
           geometry,
-          new THREE.MeshStandardMaterial({ color: 0xa3acb9, roughness: 0.65, metalness: 0.1, side: THREE.DoubleSide }),
+          new THREE.MeshStandardMaterial({ color: 0x8b95a5, roughness: 0.6, metalness: 0.1, side: THREE.DoubleSide }),
         );
     this.part.name = 'part';
     this.scene.add(this.part);
@@ -269,8 +269,11 @@ export class GraspViewer {
     const ray = new THREE.Raycaster();
     ray.setFromCamera(ndc, this.camera);
     const targets = [...this.layers.values()].filter((l) => l.group.visible).flatMap((l) => l.instanced);
-    const hit = ray.intersectObjects(targets, false).find((h) => h.instanceId !== undefined);
-    if (hit) this.select(hit.object.userData.layer, hit.instanceId);
+    // the part is a target too: a gripper behind it is not picked through it
+    const hit = ray.intersectObjects(this.part ? [this.part, ...targets] : targets, false)[0];
+    if (hit && hit.instanceId !== undefined && hit.object !== this.part) {
+      this.select(hit.object.userData.layer, hit.instanceId);
+    }
   }
 
   /** Highlight grasp `index` of layer `id` with its contacts, normals and free rolls (ghosts); null clears. */

@@ -107,7 +107,12 @@ export async function setPage(main, id) {
   const candidatesNote = h('span', { class: 'muted' });
   const colourSelect = h('select', { id: 'colour-by' });
   const showCandidates = h('input', { type: 'checkbox', id: 'show-candidates', checked: true });
-  const showGrippers = h('input', { type: 'checkbox', id: 'show-grippers', checked: true });
+  const showGrippers = h(
+    'select',
+    { id: 'show-grippers' },
+    h('option', { value: 'all' }, 'at every grasp'),
+    h('option', { value: 'selected' }, 'at the selected grasp only'),
+  );
   const fitButton = h('button', { type: 'button' }, 'Fit view');
 
   clear(
@@ -124,7 +129,8 @@ export async function setPage(main, id) {
           { class: 'view-controls' },
           h('label', { for: 'colour-by' }, 'Colour by '),
           colourSelect,
-          h('label', {}, showGrippers, ' grippers'),
+          h('label', { for: 'show-grippers' }, 'Grippers '),
+          showGrippers,
           h('label', {}, showCandidates, ' candidates '),
           candidatesNote,
           fitButton,
@@ -174,7 +180,7 @@ export async function setPage(main, id) {
   main.addEventListener('page:leave', () => viewer.dispose(), { once: true });
   viewer.setPart(part.geometry, part.points);
   try {
-    viewer.setGrasps('a', exportJson, colouring.colours, { meshes });
+    viewer.setGrasps('a', exportJson, colouring.colours, { meshes, opacity: 0.8 });
   } catch (err) {
     status(statusEl, `The gripper cannot be drawn: ${err.message}`, 'error');
   }
@@ -222,7 +228,7 @@ export async function setPage(main, id) {
     viewer.select('a', (at + (e.key === 'ArrowRight' ? 1 : grasps.length - 1)) % grasps.length);
   });
   fitButton.addEventListener('click', () => viewer.fit());
-  showGrippers.addEventListener('change', () => viewer.setLayerVisible('a', showGrippers.checked));
+  showGrippers.addEventListener('change', () => viewer.setLayerVisible('a', showGrippers.value === 'all'));
 
   // header, state and actions
   async function renderHeader() {
