@@ -36,8 +36,9 @@ def test_javascript_unit_tests_pass():
     assert "# fail 0" in run.stdout and "# pass " in run.stdout
 
 
+@pytest.mark.parametrize("reader", ["fflate", "native"])
 @pytest.mark.parametrize("writer", ["graspgen", "savez", "savez_compressed"])
-def test_the_page_reads_npz_files_as_numpy_does(writer, tmp_path):
+def test_the_page_reads_npz_files_as_numpy_does(writer, reader, tmp_path):
     node = _node()
     rng = np.random.default_rng(3)
     arrays = {
@@ -54,7 +55,11 @@ def test_the_page_reads_npz_files_as_numpy_does(writer, tmp_path):
     else:
         getattr(np, writer)(path, **arrays)
     run = subprocess.run(
-        [node, str(UI / "scripts" / "npz_dump.mjs"), str(path)], cwd=UI, capture_output=True, text=True, timeout=60
+        [node, str(UI / "scripts" / "npz_dump.mjs"), str(path), "--reader", reader],
+        cwd=UI,
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert run.returncode == 0, run.stderr
     read = json.loads(run.stdout)

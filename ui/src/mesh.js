@@ -7,7 +7,7 @@ import { OBJLoader } from 'three/addons/loaders/OBJLoader.js';
 import { PLYLoader } from 'three/addons/loaders/PLYLoader.js';
 import { STLLoader } from 'three/addons/loaders/STLLoader.js';
 import { UNIT_SCALE } from './gripper.js';
-import { readNpz } from './npz.js';
+import { readNpzAsync } from './npz.js';
 
 /** Triangles of every mesh under `root` (world transforms applied) as one non-indexed geometry. */
 function mergedTriangles(root) {
@@ -88,7 +88,7 @@ export async function partGeometry(buffer, format, units) {
       break;
     }
     case 'npz': {
-      const { points: p } = readNpz(buffer, ['points']);
+      const { points: p } = await readNpzAsync(buffer, ['points']);
       if (!p) throw new Error('the NPZ has no points array');
       geometry = new THREE.BufferGeometry();
       geometry.setAttribute('position', new THREE.BufferAttribute(Float32Array.from(p.data), 3));

@@ -7,7 +7,7 @@ import { MEASURES, normalise, ramp, range } from './colour.js';
 import { badge, clear, h } from './dom.js';
 import { meshPaths } from './gripper.js';
 import { partGeometry } from './mesh.js';
-import { readNpz } from './npz.js';
+import { readNpzAsync } from './npz.js';
 
 /** The summary (GET /v1/grasp-sets list item) of set `id` of the pair, or null. */
 export async function setSummary(id, object, gripper) {
@@ -74,9 +74,10 @@ export async function loadPart(exportJson) {
 }
 
 /** Everything drawing set `id` needs, loaded in parallel where it can be. */
-export async function loadSet(id) {
+export async function loadSet(id, afterExport = null) {
   const exportJson = await getJson(`/v1/grasp-sets/${id}`);
   performance.mark(`gg:set:${id}:export`);
+  afterExport?.();
   const summaryP = setSummary(id, exportJson.object.name, exportJson.gripper.name);
   const [part, summary] = await Promise.all([loadPart(exportJson), summaryP]);
   const meshes = summary ? await gripperMeshes(exportJson.gripper, summary.gripper_version) : null;
@@ -91,10 +92,19 @@ export function graspColours(grasps, measure) {
   return { colours: values.map((v) => (v === null ? [0.6, 0.6, 0.6] : ramp(normalise(v, r)))), range: r };
 }
 
+/** The candidate NPZ's bytes (started early: the download overlaps drawing the part and the grippers). */
+export function downloadCandidates(id) {
+  const p = getBytes(`/v1/grasp-sets/${id}/candidates`);
+  p.catch(() => {}); // handled where it is awaited
+  return p;
+}
+
 /** The candidate NPZ's midpoints and per-candidate values, coloured like the grasps (sRGB bytes). */
-export async function loadCandidates(id, measure, graspRange) {
-  const bytes = await getBytes(`/v1/grasp-sets/${id}/candidates`);
-  const arrays = readNpz(bytes, ['midpoints', 'friction_margin_deg', 'hold_margin', 'quality_terms']);
+export async function loadCandidates(id, measure, graspRange, download = null) {
+  const bytes = await (download ?? downloadCandidates(id));
+  performance.mark('gg:candidates:fetched');
+  const arrays = await readNpzAsync(bytes, ['midpoints', 'friction_margin_deg', 'hold_margin']);
+  performance.mark('gg:candidates:inflated');
   const mid = arrays.midpoints;
   if (!mid) throw new Error('the candidate NPZ has no midpoints');
   const n = mid.shape[0];
@@ -107,6 +117,7 @@ export async function loadCandidates(id, measure, graspRange) {
     colours[i * 3 + 1] = c[1] * 255;
     colours[i * 3 + 2] = c[2] * 255;
   }
+  performance.mark('gg:candidates:coloured');
   return { n, positions: mid.data, colours, range: r, bytes: bytes.byteLength };
 }
 

@@ -39,11 +39,39 @@ function partMatrix(pose, part) {
   return m;
 }
 
+// Lambert shading: enough to read shapes, and its shaders compile in a fraction of the time of physically based
+// ones on software GL (a plant PC without a GPU), where compiling dominates the first frame
+function partMaterial() {
+  return new THREE.MeshLambertMaterial({ color: 0x8b95a5, side: THREE.DoubleSide });
+}
+
+/** The grippers' material: white, tinted per instance (InstancedMesh colours), see-through below opacity 1. */
+function gripperMaterial(opacity) {
+  return new THREE.MeshLambertMaterial({ color: 0xffffff, transparent: opacity < 1, opacity });
+}
+
+let software = null;
+
+/**
+ * Whether WebGL runs on a software rasteriser (SwiftShader, llvmpipe: a plant PC without a GPU, a headless
+ * browser). There multisampling costs more than the whole scene, so the viewer draws without it.
+ */
+export function softwareRendering() {
+  if (software === null) {
+    const gl = document.createElement('canvas').getContext('webgl2');
+    const info = gl?.getExtension('WEBGL_debug_renderer_info');
+    const name = info ? String(gl.getParameter(info.UNMASKED_RENDERER_WEBGL)) : '';
+    software = /swiftshader|llvmpipe|softpipe|software/i.test(name);
+    gl?.getExtension('WEBGL_lose_context')?.loseContext();
+  }
+  return software;
+}
+
 export class GraspViewer {
   /** `container`: the element the canvas fills; `label`: the canvas' accessible name. */
   constructor(container, { label = '3D view of the grasp set' } = {}) {
     this.container = container;
-    this.renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+    this.renderer = new THREE.WebGLRenderer({ antialias: !softwareRendering(), preserveDrawingBuffer: true });
     this.renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
     this.renderer.setClearColor(BACKGROUND);
     const canvas = this.renderer.domElement;
@@ -64,6 +92,13 @@ export class GraspViewer {
     this.scene.add(this.camera);
     this.axes = new THREE.AxesHelper(0.02);
     this.scene.add(this.axes);
+    // one material for every candidate cloud, and a one-point cloud drawn from the first frame on: its shader
+    // program is compiled while the candidates download, not when they arrive (software GL takes ~1 s for it)
+    this.pointsMaterial = new THREE.PointsMaterial({ size: 3, sizeAttenuation: false, vertexColors: true, depthWrite: false });
+    const seed = new THREE.BufferGeometry();
+    seed.setAttribute('position', new THREE.Float32BufferAttribute([0, 0, 0], 3));
+    seed.setAttribute('color', new THREE.Float32BufferAttribute([0.95, 0.96, 0.96], 3));
+    this.scene.add(new THREE.Points(seed, this.pointsMaterial));
     this.layers = new Map();
     this.part = null;
     this.selection = new THREE.Group();
@@ -104,6 +139,12 @@ export class GraspViewer {
   renderNow() {
     this.renderer.render(this.scene, this.camera);
     const done = this.afterRender.splice(0);
+    if (done.length) {
+      // GL calls return before the GPU (or SwiftShader) has drawn; reading a pixel waits until it has, so whoever
+      // awaits rendered() (the performance marks) sees the frame on screen, not merely submitted
+      const gl = this.renderer.getContext();
+      gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(4));
+    }
     for (const f of done) f();
   }
 
@@ -119,10 +160,7 @@ export class GraspViewer {
     if (this.part) this.scene.remove(this.part);
     this.part = points
       ? new THREE.Points(geometry, new THREE.PointsMaterial({ color: 0x6b7280, size: 2, sizeAttenuation: false }))
-      : new THREE.Mesh(
-          geometry,
-          new THREE.MeshStandardMaterial({ color: 0x8b95a5, roughness: 0.6, metalness: 0.1, side: THREE.DoubleSide }),
-        );
+      : new THREE.Mesh(geometry, partMaterial());
     this.part.name = 'part';
     this.scene.add(this.part);
     const r = geometry.boundingSphere?.radius ?? 0.05;
@@ -145,13 +183,7 @@ export class GraspViewer {
       const partsOf = grasps.map((g) => gripperParts(spec, g.width));
       partsOf[0].forEach((first, k) => {
         const geometry = shapeGeometry(first, meshes);
-        const material = new THREE.MeshStandardMaterial({
-          color: 0xffffff,
-          roughness: 0.5,
-          metalness: 0.05,
-          transparent: opacity < 1,
-          opacity,
-        });
+        const material = gripperMaterial(opacity);
         const mesh = new THREE.InstancedMesh(geometry, material, grasps.length);
         mesh.name = `${id}-${first.role}`;
         grasps.forEach((g, i) => {
@@ -221,10 +253,7 @@ export class GraspViewer {
     const geometry = new THREE.BufferGeometry();
     geometry.setAttribute('position', new THREE.BufferAttribute(p, 3));
     geometry.setAttribute('color', new THREE.BufferAttribute(c, 3));
-    const points = new THREE.Points(
-      geometry,
-      new THREE.PointsMaterial({ size: 3, sizeAttenuation: false, vertexColors: true, depthWrite: false }),
-    );
+    const points = new THREE.Points(geometry, this.pointsMaterial);
     points.name = `candidates-${id}`;
     layer.candidates = points;
     this.scene.add(points);
@@ -290,7 +319,7 @@ export class GraspViewer {
       this.showInstance(layer, index, false);
       layer.hidden.add(index);
       const parts = gripperParts(layer.spec, grasp.width);
-      const solid = new THREE.MeshStandardMaterial({ color: HIGHLIGHT, emissive: 0x662200, roughness: 0.4 });
+      const solid = new THREE.MeshLambertMaterial({ color: HIGHLIGHT, emissive: 0x662200 });
       const ghost = new THREE.MeshBasicMaterial({ color: 0x2563eb, transparent: true, opacity: 0.16, depthWrite: false });
       const rolls = (grasp.free_rolls_deg ?? []).filter((r) => Math.abs(r - (grasp.roll_deg ?? NaN)) > 1e-9);
       const axis = rollAxis(layer.spec);

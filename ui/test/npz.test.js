@@ -2,7 +2,7 @@
 import assert from 'node:assert/strict';
 import { test } from 'node:test';
 import { zipSync } from 'fflate';
-import { parseNpy, readNpz } from '../src/npz.js';
+import { parseNpy, readNpz, readNpzAsync, zipMembers } from '../src/npz.js';
 
 /** A version-1 .npy of `typed` (a typed array) with the header NumPy writes. */
 function npy(descr, shape, typed, fortran = false) {
@@ -44,7 +44,26 @@ for (const level of [0, 6]) {
     const some = readNpz(zip, ['midpoints']);
     assert.deepEqual(Object.keys(some), ['midpoints']);
   });
+
+  test(`readNpzAsync (native inflater) reads ${level ? 'deflated' : 'stored'} members as readNpz does`, async () => {
+    const zip = zipSync(
+      { 'midpoints.npy': npy('<f8', [2, 3], midpoints), 'medoids.npy': npy('<i8', [2], medoids), 'x.txt': new Uint8Array(3) },
+      { level },
+    );
+    const members = zipMembers(zip);
+    assert.deepEqual(Object.keys(members).sort(), ['medoids.npy', 'midpoints.npy', 'x.txt']);
+    assert.equal(members['midpoints.npy'].method, level ? 8 : 0);
+    const all = await readNpzAsync(zip);
+    assert.deepEqual(Object.keys(all).sort(), ['medoids', 'midpoints']);
+    assert.deepEqual([...all.midpoints.data], [...midpoints]);
+    assert.deepEqual([...all.medoids.data], [3n, 0n]);
+    assert.deepEqual(Object.keys(await readNpzAsync(zip.buffer, ['medoids'])), ['medoids']);
+  });
 }
+
+test('zipMembers refuses what is not a zip', () => {
+  assert.throws(() => zipMembers(new Uint8Array(100)), /not a zip/);
+});
 
 test('parseNpy refuses what it cannot read', () => {
   assert.throws(() => parseNpy(new Uint8Array([1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11])), /magic/);

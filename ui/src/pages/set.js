@@ -13,6 +13,7 @@ import {
   loadSet,
   servedBy,
   stateBadges,
+  downloadCandidates,
   status,
 } from '../shared.js';
 import { GraspViewer } from '../viewer.js';
@@ -159,10 +160,13 @@ export async function setPage(main, id) {
   clear(selectedEl, h('h2', { id: 'sel-title' }, 'Selected grasp'), h('p', { class: 'muted' }, 'None yet.'));
   status(statusEl, `Loading set ${id}…`);
 
-  let viewer;
   let bundle;
+  let download = null;
+  const viewer = new GraspViewer(viewerEl, { label: `3D view of grasp set ${id}` });
+  main.addEventListener('page:leave', () => viewer.dispose(), { once: true });
   try {
-    bundle = await loadSet(id);
+    // the candidates download once the export is in (not before: it would slow the export down), beside the part
+    bundle = await loadSet(id, () => (download = downloadCandidates(id)));
   } catch (err) {
     status(statusEl, explain(err), 'error');
     viewerEl.dataset.state = 'error';
@@ -176,8 +180,10 @@ export async function setPage(main, id) {
   const measure = () => colourSelect.value || 'friction_margin_deg';
   let colouring = graspColours(grasps, measure());
 
-  viewer = new GraspViewer(viewerEl, { label: `3D view of grasp set ${id}: ${grasps.length} grasps on ${exportJson.object.name}` });
-  main.addEventListener('page:leave', () => viewer.dispose(), { once: true });
+  viewer.renderer.domElement.setAttribute(
+    'aria-label',
+    `3D view of grasp set ${id}: ${grasps.length} grasps on ${exportJson.object.name}`,
+  );
   viewer.setPart(part.geometry, part.points);
   try {
     viewer.setGrasps('a', exportJson, colouring.colours, { meshes, opacity: 0.8 });
@@ -261,12 +267,28 @@ export async function setPage(main, id) {
     Object.assign(summary, (await loadSet(id).catch(() => ({ summary }))).summary ?? {});
     await renderHeader();
   }
-  await renderHeader();
+  const header = renderHeader();
 
-  // details: funnel, coverage, parameters, timings, the job
+  // details: funnel, coverage, parameters, timings, the job (its times arrive when they do)
   const stats = exportJson.stats ?? {};
-  let job = null;
-  if (summary?.job) job = await getJson(`/v1/jobs/${summary.job}`).catch(() => null);
+  const jobEl = h('div');
+  const job = summary?.job
+    ? getJson(`/v1/jobs/${summary.job}`)
+        .then((j) =>
+          clear(
+            jobEl,
+            facts([
+              ['job', h('a', { href: `#/jobs/${j.id}` }, j.id)],
+              ['submitted', `${when(j.created_at)} by ${j.created_by ?? '?'}`],
+              ['started', when(j.started_at)],
+              ['finished', when(j.finished_at)],
+              j.started_at &&
+                j.finished_at && ['run time', `${((new Date(j.finished_at) - new Date(j.started_at)) / 1000).toFixed(1)} s`],
+            ]),
+          ),
+        )
+        .catch(() => clear(jobEl, h('p', { class: 'muted' }, 'The job that made this set is not readable with this token.')))
+    : null;
   clear(
     detailsEl,
     h('h2', {}, 'How the set was made'),
@@ -278,24 +300,18 @@ export async function setPage(main, id) {
     stats.hold ? kv(stats.hold, 'Hold (criterion (e))') : null,
     kv(exportJson.params, 'Parameters'),
     kv(stats.timings_s, 'Timings (seconds)'),
-    job
-      ? facts([
-          ['job', job.id],
-          ['submitted', `${when(job.created_at)}`],
-          ['started', when(job.started_at)],
-          ['finished', when(job.finished_at)],
-          job.started_at && job.finished_at && ['run time', `${((new Date(job.finished_at) - new Date(job.started_at)) / 1000).toFixed(1)} s`],
-        ])
-      : null,
+    jobEl,
     kv(exportJson.gripper, `Gripper ${exportJson.gripper.name}`),
   );
 
   // the candidate cloud, after the grasps are on screen
   let cloud = null;
   async function drawCandidates() {
+    performance.mark('gg:candidates:start');
     candidatesNote.textContent = '(loading…)';
     try {
-      cloud = await loadCandidates(id, measure(), colouring.range);
+      cloud = await loadCandidates(id, measure(), colouring.range, download);
+      download = null; // a change of colouring downloads again (the browser's cache answers)
       const drawn = viewer.setCandidates('a', cloud.positions, cloud.colours);
       viewer.setCandidatesVisible('a', showCandidates.checked);
       candidatesNote.textContent =
@@ -315,6 +331,7 @@ export async function setPage(main, id) {
   await drawCandidates();
   performance.mark('gg:set:candidates');
   performance.measure('gg:set:candidates', 'gg:set:start', 'gg:set:candidates');
+  await Promise.all([header, job]);
   viewerEl.dataset.state = 'complete';
   viewerEl.dataset.candidates = String(cloud?.n ?? 0);
 }
