@@ -13,16 +13,22 @@ if [ "$(cat .venv/.setup-stamp 2>/dev/null)" != "$stamp" ]; then
   .venv/bin/python -m pip install -q --disable-pip-version-check -c constraints.txt -e '.[dev,service,validate,client]'
   echo "$stamp" > .venv/.setup-stamp
 fi
-# the review page's browser tests and benchmark drive Debian's Chromium (tests/ui/browser.py); they skip without it
-if [ ! -x /usr/bin/chromium ]; then
+# the review page's browser tests and benchmark drive Debian's Chromium, and Firefox ESR on an Xvfb display
+# (tests/ui/browser.py); each skips without its browser
+missing_browsers=""
+[ -x /usr/bin/chromium ] || missing_browsers="chromium"
+[ -x /usr/bin/firefox-esr ] && command -v Xvfb >/dev/null || missing_browsers="$missing_browsers firefox-esr xvfb"
+if [ -n "$missing_browsers" ]; then
   if [ "$(id -u)" = 0 ]; then as_root=""; elif command -v sudo >/dev/null && sudo -n true 2>/dev/null; then as_root="sudo -n"
   else as_root="none"; fi
   if [ "$as_root" != none ] && command -v apt-get >/dev/null; then
-    $as_root apt-get update -qq >/dev/null && DEBIAN_FRONTEND=noninteractive $as_root apt-get install -y -qq chromium >/dev/null \
-      || echo "setup: installing chromium failed; the browser tests of the review page will skip" >&2
+    # shellcheck disable=SC2086
+    $as_root apt-get update -qq >/dev/null \
+      && DEBIAN_FRONTEND=noninteractive $as_root apt-get install -y -qq $missing_browsers >/dev/null \
+      || echo "setup: installing$missing_browsers failed; those browser tests of the review page will skip" >&2
   else
-    echo "setup: /usr/bin/chromium is missing and cannot be installed here (needs root or sudo, and apt-get):" \
-      "the browser tests of the review page will skip (apt-get install chromium)" >&2
+    echo "setup: missing$missing_browsers, which cannot be installed here (needs root or sudo, and apt-get):" \
+      "those browser tests of the review page will skip (apt-get install$missing_browsers)" >&2
   fi
 fi
 # the review page's front-end dependencies, exactly as ui/package-lock.json pins them (the build is checked in under

@@ -48,3 +48,20 @@ def drawn_share(png: bytes, background: tuple[int, int, int] = (0xF3, 0xF4, 0xF6
 
     rgb = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.int16)
     return float((np.abs(rgb - np.array(background)).sum(axis=2) > tolerance).mean())
+
+
+# -- Firefox: Debian's firefox-esr through Marionette (Mozilla's own remote protocol and client) on an Xvfb display
+#    (headless Firefox has no GL on a machine without a GPU; on Xvfb it renders WebGL with Mesa's llvmpipe)
+FIREFOX = os.environ.get("GRASPGEN_FIREFOX", "/usr/bin/firefox-esr")
+
+
+def firefox_missing() -> str | None:
+    if not Path(FIREFOX).is_file():
+        return f"Firefox not found at {FIREFOX} (apt-get install firefox-esr xvfb)"
+    if shutil.which("Xvfb") is None:
+        return "Xvfb not found (apt-get install xvfb): Firefox needs a display for WebGL here"
+    try:
+        import marionette_driver  # noqa: F401
+    except ImportError:
+        return "marionette-driver (Python) is not installed (pip install -e '.[dev]')"
+    return None

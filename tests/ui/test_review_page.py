@@ -9,65 +9,27 @@ from __future__ import annotations
 
 import json
 import re
-import time
 from collections.abc import Iterator
 from urllib.parse import urlsplit
 
 import httpx
 import pytest
-from services_conftest import GRIPPER, box_stl, settings_env, start_serve, stop_process, write_tokens_file
 
 from tests.ui.browser import ARTIFACTS, drawn_share, launch, missing
+from tests.ui.seed import SMALL, seeded_serve, wait_job
 
-pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.xdist_group("ui-browser")]
-
-SMALL = {"points": 600, "k1": 4, "k2": 2}
-
-
-def _wait(c: httpx.Client, job_id: str, timeout: float = 300) -> dict:
-    end = time.monotonic() + timeout
-    while (body := c.get(f"/v1/jobs/{job_id}").json())["state"] in ("queued", "running"):
-        assert time.monotonic() < end, body
-        time.sleep(0.2)
-    return body
+pytestmark = [
+    pytest.mark.integration,
+    pytest.mark.slow,
+    pytest.mark.xdist_group("ui-browser"),
+    pytest.mark.skipif(missing() is not None, reason=str(missing())),
+]
 
 
 @pytest.fixture(scope="module")
 def served(tmp_path_factory) -> Iterator[dict]:
-    reason = missing()
-    if reason:
-        pytest.skip(reason)
-    root = tmp_path_factory.mktemp("ui")
-    tokens = write_tokens_file(root / "tokens.json")
-    env = settings_env(storage_dir=root / "var", tokens_file=root / "tokens.json")
-    proc, url = start_serve(env, root / "serve.log")
-    try:
-        with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {tokens['writer']}"}, timeout=60) as c:
-            up = c.post(
-                "/v1/objects",
-                files={"file": ("box.stl", box_stl((40.0, 30.0, 20.0)))},
-                data={"name": "ui-box", "units": "mm", "mass_kg": "0.05"},
-            )
-            assert up.status_code == 201, up.text
-            assert c.post("/v1/grippers", json={**GRIPPER, "name": "ui-jaw", "grip_force": 20.0}).status_code == 201
-            first = c.post("/v1/jobs", json={"object": "ui-box", "gripper": "ui-jaw", "params": SMALL}).json()
-            second = c.post(
-                "/v1/jobs", json={"object": "ui-box", "gripper": "ui-jaw", "params": {**SMALL, "points": 900}}
-            ).json()
-            bulk = c.post(
-                "/v1/bulk-jobs",
-                json={"items": [{"object": "ui-box", "gripper": "no-such-gripper"}]},
-            ).json()
-            done = [_wait(c, j["id"]) for j in (first, second, bulk)]
-            assert [d["state"] for d in done] == ["succeeded", "succeeded", "failed"], done
-        yield {
-            "url": url,
-            "tokens": tokens,
-            "sets": [done[0]["grasp_set"], done[1]["grasp_set"]],
-            "jobs": {"ok": first["id"], "failed": bulk["id"]},
-        }
-    finally:
-        stop_process(proc)
+    with seeded_serve(tmp_path_factory.mktemp("ui")) as s:
+        yield s
 
 
 @pytest.fixture(scope="module")
@@ -277,7 +239,7 @@ def _draws_a_set_of(served, browser_page, spec: dict, files: dict[str, bytes] | 
         if r.status_code not in (200, 201):
             pytest.skip(f"this server does not accept a {name} gripper yet ({r.status_code}: {r.text[:200]})")
         job = c.post("/v1/jobs", json={"object": "ui-box", "gripper": spec["name"], "params": SMALL}).json()
-        done = _wait(c, job["id"])
+        done = wait_job(c, job["id"])
         if done["state"] != "succeeded" or not done.get("grasp_set"):
             pytest.skip(f"this server cannot run a job with a {name} gripper yet: {done.get('error')}")
     page = browser_page["page"]

@@ -267,11 +267,12 @@ export class GraspViewer {
     this.requestRender();
   }
 
-  /** Look at everything drawn (part and grippers) from the current direction. */
+  /** Look at everything shown (part, visible grippers, the selected grasp) from the current direction. */
   fit() {
     const box = new THREE.Box3();
     if (this.part) box.expandByObject(this.part);
-    for (const layer of this.layers.values()) box.expandByObject(layer.group);
+    for (const layer of this.layers.values()) if (layer.group.visible) box.expandByObject(layer.group);
+    if (this.selection.children.length) box.expandByObject(this.selection);
     if (box.isEmpty()) return;
     const sphere = box.getBoundingSphere(new THREE.Sphere());
     const dir = this.camera.position.clone().sub(this.controls.target).normalize();
