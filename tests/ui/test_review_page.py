@@ -16,7 +16,7 @@ import httpx
 import pytest
 
 from tests.ui.browser import ARTIFACTS, drawn_share, launch, missing
-from tests.ui.seed import SMALL, seeded_serve, wait_job
+from tests.ui.seed import SMALL, add_pairs, seeded_serve, wait_job
 
 pytestmark = [
     pytest.mark.integration,
@@ -88,6 +88,30 @@ def test_catalogue_lists_the_seeded_pair(served, browser_page):
     page.get_by_label("Object name contains").fill("ui-")
     row.wait_for()
     shot(page, "02-catalogue")
+
+
+def test_the_catalogue_pages_with_the_servers_cursors(served, browser_page):
+    page = browser_page["page"]
+    add_pairs(served["root"], "zz-page", 120)  # after ui-box by name: the first test's page stays as it was
+    requests_before = len(browser_page["requests"])
+    page.get_by_label("Object name contains").fill("zz-page")
+    caption = page.locator("table.catalogue caption")
+    caption.get_by_text("Pairs 1–50 of 120").wait_for()
+    assert page.locator("table.catalogue tbody tr").count() == 50
+    assert page.locator("table.catalogue tbody tr").first.inner_text().startswith("zz-page-000")
+    page.get_by_role("button", name="Next →").click()
+    caption.get_by_text("Pairs 51–100 of 120").wait_for()
+    assert page.locator("table.catalogue tbody tr").first.inner_text().startswith("zz-page-050")
+    page.get_by_role("button", name="Next →").click()
+    caption.get_by_text("Pairs 101–120 of 120").wait_for()
+    assert page.get_by_role("button", name="Next →").is_disabled()
+    page.get_by_role("button", name="← Previous").click()
+    caption.get_by_text("Pairs 51–100 of 120").wait_for()
+    shot(page, "02b-catalogue-page-2")
+    # every page came from the server with its cursor and a limit of 50: never the whole catalogue
+    pairs = [u for u in browser_page["requests"][requests_before:] if "/v1/pairs?" in u]
+    assert pairs and all("limit=50" in u for u in pairs)
+    assert sum("cursor=" in u for u in pairs) >= 3
 
 
 def test_set_page_draws_the_part_and_the_gripper_and_shows_a_grasps_numbers(served, browser_page):

@@ -162,11 +162,14 @@ export async function setPage(main, id) {
 
   let bundle;
   let download = null;
+  // the requests first, then the WebGL context (creating it blocks this thread for a while on software GL);
+  // the candidates download once the export is in (not before: it would slow the export down), beside the part
+  const loading = loadSet(id, () => (download = downloadCandidates(id)));
+  loading.catch(() => {}); // handled below
   const viewer = new GraspViewer(viewerEl, { label: `3D view of grasp set ${id}` });
   main.addEventListener('page:leave', () => viewer.dispose(), { once: true });
   try {
-    // the candidates download once the export is in (not before: it would slow the export down), beside the part
-    bundle = await loadSet(id, () => (download = downloadCandidates(id)));
+    bundle = await loading;
   } catch (err) {
     status(statusEl, explain(err), 'error');
     viewerEl.dataset.state = 'error';
@@ -313,6 +316,7 @@ export async function setPage(main, id) {
       cloud = await loadCandidates(id, measure(), colouring.range, download);
       download = null; // a change of colouring downloads again (the browser's cache answers)
       const drawn = viewer.setCandidates('a', cloud.positions, cloud.colours);
+      cloud.drawn = drawn;
       viewer.setCandidatesVisible('a', showCandidates.checked);
       candidatesNote.textContent =
         drawn < cloud.n ? `(${num(drawn)} of ${num(cloud.n)} drawn)` : `(${num(cloud.n)})`;
@@ -334,4 +338,5 @@ export async function setPage(main, id) {
   await Promise.all([header, job]);
   viewerEl.dataset.state = 'complete';
   viewerEl.dataset.candidates = String(cloud?.n ?? 0);
+  viewerEl.dataset.drawnCandidates = String(cloud?.drawn ?? 0);
 }
