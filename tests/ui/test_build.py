@@ -85,3 +85,38 @@ def test_the_checked_in_build_is_what_the_sources_make(tmp_path):
     stale = "services/api/ui/ is not the build of ui/: run `npm run build` in ui/ and commit services/api/ui/"
     assert sorted(fresh) == sorted(shipped), stale
     assert all(fresh[k] == shipped[k] for k in fresh), stale
+
+
+@pytest.mark.parametrize("fmt", ["stl", "obj", "ply", "off", "glb", "npz"])
+@pytest.mark.parametrize("units", ["mm", "in"])
+def test_the_page_reads_parts_where_graspgen_does(fmt, units, tmp_path):
+    """A part file read by the page (src/mesh.js, three.js' loaders) lies where graspgen's loader puts it: the same
+    bounds in metres (the grasp poses are drawn on it) and the same triangles."""
+    import trimesh
+
+    from graspgen.parts import load_part
+
+    node = _node()
+    mesh = trimesh.creation.box(extents=(40.0, 30.0, 20.0))
+    mesh.apply_translation((5.0, -3.0, 10.0))
+    path = tmp_path / f"part.{fmt}"
+    if fmt == "npz":
+        np.savez(path, points=np.asarray(mesh.vertices), normals=np.asarray(mesh.vertex_normals))
+    else:
+        data = mesh.export(file_type=fmt)
+        path.write_bytes(data if isinstance(data, bytes) else data.encode())
+    part = load_part(path, units=units)
+    run = subprocess.run(
+        [node, str(UI / "scripts" / "mesh_dump.mjs"), str(path), fmt, units],
+        cwd=UI,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert run.returncode == 0, run.stderr[-2000:]
+    read = json.loads(run.stdout)
+    ours = part.points if part.points is not None else np.asarray(part.mesh.vertices)
+    np.testing.assert_allclose(read["min"], ours.min(axis=0), atol=1e-7)  # float32 in the browser
+    np.testing.assert_allclose(read["max"], ours.max(axis=0), atol=1e-7)
+    assert read["points"] == (fmt == "npz")
+    assert read["triangles"] == (0 if fmt == "npz" else len(part.mesh.faces))

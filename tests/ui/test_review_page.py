@@ -156,6 +156,13 @@ def test_set_page_draws_the_part_and_the_gripper_and_shows_a_grasps_numbers(serv
     assert "outside" in funnel and f"{export['stats']['pairs_total']:,}" in funnel
     # the canvas is keyboard reachable: → selects the next grasp
     page.get_by_role("button", name="Grasp 2", exact=True).click()
+    # every control has a name a screen reader can say; the buttons are real buttons
+    unlabelled = page.evaluate(
+        "[...document.querySelectorAll('input, select')]"
+        ".filter(e => !(e.labels && e.labels.length) && !e.getAttribute('aria-label')).map(e => e.outerHTML)"
+    )
+    assert unlabelled == []
+    assert page.evaluate("[...document.querySelectorAll('button')].every(b => b.textContent.trim().length > 0)")
     canvas.focus()
     page.keyboard.press("ArrowRight")
     selected.get_by_text(f"Grasp 3 of {n}").wait_for()
@@ -179,6 +186,10 @@ def test_a_write_token_releases_and_the_catalogue_says_so(served, browser_page):
     head = httpx.get(catalogue, headers=auth).headers
     assert head["graspgen-released"] == "true" and head["graspgen-set-id"] == str(older)
     page.locator(".badge.released").first.wait_for()
+    # the set page itself shows the new state and the history entry
+    on_page = page.locator("details.pair-history[open] table.history")
+    on_page.wait_for()
+    assert "writer" in on_page.inner_text() and f"set {older}" in on_page.inner_text()
     page.get_by_role("link", name="Versions and history").click()
     history = page.locator("table.history")
     history.wait_for()
@@ -191,8 +202,15 @@ def test_a_read_token_gets_the_403_explained(served, browser_page):
     newer = served["sets"][1]
     use_token(page, served["tokens"]["reader"])
     open_set(page, newer)
-    page.get_by_role("button", name=f"Release set {newer}").click()
-    page.locator("dialog.confirm").get_by_role("button", name=f"Release set {newer}").click()
+    # by keyboard alone: the button, then the dialog (it opens on Cancel, the safe choice; Tab reaches Release)
+    page.get_by_role("button", name=f"Release set {newer}").focus()
+    page.keyboard.press("Enter")
+    dialog = page.locator("dialog.confirm")
+    dialog.wait_for()
+    assert page.evaluate("document.activeElement.textContent") == "Cancel"
+    page.keyboard.press("Tab")
+    assert page.evaluate("document.activeElement.textContent") == f"Release set {newer}"
+    page.keyboard.press("Enter")
     alert = page.locator(".change-status [role=alert]")
     alert.wait_for()
     assert "403 Forbidden" in alert.inner_text() and "write" in alert.inner_text()

@@ -12,11 +12,13 @@ import {
   loadCandidates,
   loadSet,
   servedBy,
+  setSummary,
   stateBadges,
   downloadCandidates,
   status,
 } from '../shared.js';
 import { GraspViewer } from '../viewer.js';
+import { historyTable } from './pair.js';
 
 export function funnel(stats) {
   const total = stats.pairs_total ?? stats.pairs ?? null;
@@ -104,6 +106,7 @@ export async function setPage(main, id) {
   const selectedEl = h('section', { class: 'selected', 'aria-live': 'polite', 'aria-labelledby': 'sel-title' });
   const graspsEl = h('div', { class: 'table-wrap grasp-list' });
   const headerEl = h('div');
+  const historyEl = h('details', { class: 'pair-history' });
   const detailsEl = h('div');
   const candidatesNote = h('span', { class: 'muted' });
   const colourSelect = h('select', { id: 'colour-by' });
@@ -149,6 +152,7 @@ export async function setPage(main, id) {
         { class: 'side-pane' },
         headerEl,
         changeStatus,
+        historyEl,
         statusEl,
         selectedEl,
         h('h2', {}, 'Grasps'),
@@ -266,11 +270,19 @@ export async function setPage(main, id) {
         : null,
     );
   }
-  async function after() {
-    Object.assign(summary, (await loadSet(id).catch(() => ({ summary }))).summary ?? {});
-    await renderHeader();
+  async function renderHistory(open = false) {
+    const { name: object } = exportJson.object;
+    const { name: gripper } = exportJson.gripper;
+    const body = await historyTable(object, gripper, 5).catch((err) => h('p', { class: 'status error' }, explain(err)));
+    clear(historyEl, h('summary', {}, `Releases and withdrawals of ${object} × ${gripper} (newest 5)`), body);
+    historyEl.open = open;
   }
-  const header = renderHeader();
+  async function after() {
+    const fresh = await setSummary(id, exportJson.object.name, exportJson.gripper.name).catch(() => null);
+    Object.assign(summary, fresh ?? {});
+    await Promise.all([renderHeader(), renderHistory(true)]);
+  }
+  const header = Promise.all([renderHeader(), renderHistory()]);
 
   // details: funnel, coverage, parameters, timings, the job (its times arrive when they do)
   const stats = exportJson.stats ?? {};
