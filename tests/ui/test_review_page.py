@@ -327,6 +327,111 @@ def test_a_suction_cup_is_drawn_as_cup_and_tool(served, browser_page):
     _draws_a_set_of(served, browser_page, spec, None, "suction")
 
 
+HAND_CAD = {
+    "name": "hand-cad",
+    "kind": "parallel",
+    "stroke": 0.08,
+    "min_width": 0.0,
+    "friction": 0.5,
+    "pregrasp_clearance": 0.02,
+    "grip_force": 20.0,
+    "geometry": {"units": "mm", "finger": "fingers/finger.stl", "finger_left": "left.stl", "body": "body.stl"},
+}
+HAND_CUP = {
+    "name": "hand-cup",
+    "kind": "suction",
+    "cup_radius": 0.008,
+    "cup_height": 0.01,
+    "max_strain": 0.1,
+    "vacuum": 60000,
+    "friction": 0.5,
+    "tool": {"radius": 0.006, "length": 0.08},
+    "pregrasp_clearance": 0.03,
+}
+
+
+def test_hand_made_cad_and_suction_specs_are_drawn(served, browser_page):
+    """The contract's other two gripper forms, drawn from hand-made specs: the page's requests for these sets are
+    answered here (Playwright routes) with the box set's grasps under the hand-made gripper, its mesh files and a
+    candidate NPZ; the part is the served one."""
+    import uuid
+
+    import numpy as np
+
+    from graspgen.export import npz_bytes
+
+    page = browser_page["page"]
+    reader = {"Authorization": f"Bearer {served['tokens']['reader']}"}
+    base = httpx.get(f"{served['url']}/v1/grasp-sets/{served['sets'][0]}", headers=reader).json()
+    job = str(uuid.uuid4())
+    meshes = {
+        "fingers/finger.stl": _box_mesh_stl((10.0, 20.0, 30.0), (5.0, 0.0, 0.0)),
+        "left.stl": _box_mesh_stl((12.0, 20.0, 30.0), (6.0, 0.0, 0.0)),
+        "body.stl": _box_mesh_stl((100.0, 20.0, 20.0), (0.0, 0.0, -25.0)),
+    }
+    n = 500
+    npz = npz_bytes(
+        {
+            "midpoints": np.random.default_rng(0).uniform(-0.01, 0.01, (n, 3)),
+            "friction_margin_deg": np.linspace(1, 20, n),
+        }
+    )
+    specs = {9001: HAND_CAD, 9002: HAND_CUP}
+    served_files: list[str] = []
+
+    def answer(route) -> None:  # type: ignore[no-untyped-def]
+        url = urlsplit(route.request.url)
+        path = url.path
+        m = re.fullmatch(r"/v1/grasp-sets/(900[12])(/candidates)?", path)
+        if m:
+            if m.group(2):
+                return route.fulfill(status=200, body=npz, content_type="application/octet-stream")
+            export = {**base, "gripper": specs[int(m.group(1))]}
+            return route.fulfill(status=200, json=export)
+        if path == "/v1/grasp-sets":
+            grip = dict(p.split("=") for p in url.query.split("&"))["gripper"]
+            sid = 9001 if grip == "hand-cad" else 9002
+            summary = {
+                "id": sid, "object": "ui-box", "object_version": 1, "gripper": grip, "gripper_version": 1,
+                "version": 1, "params": base["params"], "derived_from": None, "job": job, "grasp_count": 8,
+                "sha256": "0" * 64, "etag": '"' + "0" * 64 + '"', "created_at": "2026-12-06T00:00:00Z",
+                "withdrawn_at": None, "links": {},
+            }  # fmt: skip
+            return route.fulfill(status=200, json={"items": [summary], "next_cursor": None, "links": {}})
+        if path.startswith("/v1/grippers/hand-cad/versions/1/files/"):
+            name = path.removeprefix("/v1/grippers/hand-cad/versions/1/files/")
+            served_files.append(name)
+            return route.fulfill(status=200, body=meshes[name], content_type="model/stl")
+        if path.startswith("/v1/catalogue/ui-box/hand-") and path.endswith("/history"):
+            return route.fulfill(status=200, json={"object": "ui-box", "gripper": "hand", "items": [], "links": {}})
+        if path.startswith("/v1/catalogue/ui-box/hand-"):
+            headers = {"Graspgen-Set-Id": "9001", "Graspgen-Released": "false", "Graspgen-Stale": "false"}
+            return route.fulfill(status=200, headers=headers, json={})
+        if path == f"/v1/jobs/{job}":
+            return route.fulfill(status=200, json={"id": job, "created_at": "2026-12-06T00:00:00Z"})
+        return route.continue_()
+
+    page.route(re.compile(r".*/v1/(grasp-sets|grippers/hand-cad|catalogue/ui-box/hand-|jobs/).*"), answer)
+    try:
+        for sid, name in ((9001, "cad"), (9002, "suction")):
+            open_set(page, sid)
+            assert page.locator(".status.error").count() == 0, page.locator(".status.error").first.inner_text()
+            assert page.locator(".viewer").get_attribute("data-candidates") == str(n)
+            canvas = page.locator(".viewer canvas")
+            shown = canvas.screenshot()
+            assert drawn_share(shown) > 0.02
+            page.get_by_label("Grippers").select_option("selected")
+            page.wait_for_timeout(200)
+            assert canvas.screenshot() != shown, f"the {name} grippers were not drawn"
+            page.get_by_label("Grippers").select_option("all")
+            page.get_by_role("button", name="Grasp 1", exact=True).click()
+            page.locator("section.selected").get_by_text("Grasp 1 of").wait_for()
+            shot(page, f"12-hand-made-{name}")
+        assert sorted(set(served_files)) == sorted(meshes)  # the finger, the left finger and the body, by path
+    finally:
+        page.unroute_all()
+
+
 def test_every_request_stayed_on_the_origin_and_the_console_is_clean(served, browser_page):
     origin = urlsplit(served["url"])
     requests = browser_page["requests"]
