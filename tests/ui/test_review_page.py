@@ -439,6 +439,10 @@ def test_every_request_stayed_on_the_origin_and_the_console_is_clean(served, bro
     foreign = [u for u in requests if not u.startswith(("data:", "blob:")) and urlsplit(u)[:2] != origin[:2]]
     assert foreign == []
     assert not any(re.search(r"[?&](token|access_token)=", u) for u in requests), "a token went into a URL"
+    assert not any(t in u for u in requests for t in served["tokens"].values()), "a token went into a URL"
+    # nor into storage: the tab's memory only
+    page = browser_page["page"]
+    assert page.evaluate("localStorage.length + sessionStorage.length") == 0 and page.evaluate("document.cookie") == ""
     # the read token's release attempt is refused on purpose; Chromium logs every 4xx response of a fetch
     expected = [
         e for e in browser_page["errors"] if "status of 403" in e[0] and re.search(r"/v1/grasp-sets/\d+/release$", e[1])
