@@ -327,6 +327,34 @@ def test_a_suction_cup_is_drawn_as_cup_and_tool(served, browser_page):
     _draws_a_set_of(served, browser_page, spec, None, "suction")
 
 
+def test_a_running_job_is_followed_live_until_its_set(served, browser_page):
+    """A job waiting behind a long one (the embedded worker runs one at a time) is shown queued, polled as the
+    server's Retry-After says, then linked to its set once it has run."""
+    page = browser_page["page"]
+    writer = {"Authorization": f"Bearer {served['tokens']['writer']}"}
+    with httpx.Client(base_url=served["url"], headers=writer, timeout=60) as c:
+        long = c.post(
+            "/v1/jobs", json={"object": "ui-box", "gripper": "ui-jaw", "params": {**SMALL, "points": 40000}}
+        ).json()
+        follow = c.post(
+            "/v1/jobs", json={"object": "ui-box", "gripper": "ui-jaw", "params": {**SMALL, "points": 700}}
+        ).json()
+        polls_before = sum(f"/v1/jobs/{follow['id']}" in u for u in browser_page["requests"])
+        page.evaluate(f"location.hash = '#/jobs/{follow['id']}'")
+        state = page.locator("p.job-state")
+        state.get_by_text("queued").wait_for()
+        page.get_by_text("in 2 s (the server's Retry-After)").wait_for()
+        shot(page, "10b-job-queued")
+        assert c.post(f"/v1/jobs/{long['id']}/cancel").status_code in (200, 202)
+        done = wait_job(c, follow["id"])
+    assert done["state"] == "succeeded", done
+    page.get_by_role("link", name=f"Review grasp set {done['grasp_set']}").wait_for(timeout=60_000)
+    assert page.locator("p.job-state .badge").inner_text() == "succeeded"
+    polls = sum(f"/v1/jobs/{follow['id']}" in u for u in browser_page["requests"]) - polls_before
+    assert polls >= 2, "the page did not poll the job"
+    shot(page, "10c-job-done")
+
+
 HAND_CAD = {
     "name": "hand-cad",
     "kind": "parallel",
