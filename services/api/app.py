@@ -17,12 +17,12 @@ from services.common.storage import make_storage
 from services.common.tokens import TokenStore
 from services.worker.dispatch import Dispatcher, EmbeddedDispatcher, make_dispatcher
 
-from . import observability
+from . import observability, ui
 from .http import BlobCache, HeadMiddleware
 from .limits import MULTIPART_OVERHEAD, BodyLimitMiddleware
 from .openapi_docs import document_contract
 from .problems import install_problem_handlers, problem_schema
-from .routers import grasp_sets, grippers, health, jobs, objects, pick, previews
+from .routers import grasp_sets, grippers, health, jobs, objects, pairs, pick, previews
 
 __all__ = ["create_app"]
 
@@ -94,12 +94,14 @@ def create_app(
         grippers.router,
         jobs.router,
         grasp_sets.router,
+        pairs.router,
         previews.router,
         pick.router,
         health.router,
     ):
         app.include_router(r)
     previews.install(app, settings)
+    ui.install(app)  # the review page at /ui/ (issue 34)
     observability.install(app, settings, dispatcher)  # request ids, /metrics, rate limits (issue 16)
     app.add_middleware(HeadMiddleware)  # outside request ids, metrics and rate limits: they count a HEAD as a GET
     app.add_middleware(

@@ -396,6 +396,59 @@ class CatalogueChange(BaseModel):
     links: dict[str, str]
 
 
+class PairSetSummary(GraspSetSummary):
+    created_by: str | None = Field(None, description="name of the token whose job computed it")
+
+
+class PairItem(BaseModel):
+    model_config = ConfigDict(
+        json_schema_extra={
+            "example": {
+                "object": "ring-screw",
+                "gripper": "pgn-80",
+                "current": {**GraspSetSummary.model_config["json_schema_extra"]["example"], "created_by": "plant-7"},
+                "released": True,
+                "released_id": 17,
+                "stale": False,
+                "updated_at": "2026-11-23T16:10:00Z",
+                "change_seq": 412,
+                "last_event": {
+                    "grasp_set": 17,
+                    "version": 2,
+                    "action": "release",
+                    "at": "2026-11-23T16:10:00Z",
+                    "by": "cell-engineer",
+                    "replaced": None,
+                    "links": {"grasp_set": "/v1/grasp-sets/17"},
+                },
+                "links": {
+                    "catalogue": "/v1/catalogue/ring-screw/pgn-80",
+                    "history": "/v1/catalogue/ring-screw/pgn-80/history",
+                    "grasp_sets": "/v1/grasp-sets?object=ring-screw&gripper=pgn-80",
+                },
+            }
+        }
+    )
+    object: str
+    gripper: str
+    current: PairSetSummary | None = Field(
+        description="the set the catalogue serves for the pair (GET /v1/catalogue/{object}/{gripper}); null when it "
+        "serves nothing (every set withdrawn, or none made yet for the newest object and gripper versions)"
+    )
+    released: bool = Field(description="the current set is the pair's released set")
+    released_id: int | None = Field(description="the pair's released set, if any")
+    stale: bool = Field(description="released, but made for an older object or gripper version")
+    updated_at: datetime = Field(description="when what the pair serves last changed")
+    change_seq: int = Field(description="the change number of that change (fleet sync's `since`)")
+    last_event: CatalogueEventOut | None = Field(description="the pair's newest release or withdrawal and who made it")
+    links: dict[str, str]
+
+
+class PairPage(Page):
+    items: list[PairItem]
+    total: int = Field(description="pairs matching the filters, on every page")
+
+
 class Health(BaseModel):
     status: str
     checks: dict[str, str] = Field(default_factory=dict)

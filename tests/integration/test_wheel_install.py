@@ -10,6 +10,7 @@ repository is not on the path). Every process runs with its working directory ou
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import site
 import subprocess
@@ -130,6 +131,36 @@ def test_migrate_serve_and_one_job_from_the_wheel(wheel_venv, tmp_path):
             assert body["state"] == "succeeded", body
             gs = c.get(f"/v1/grasp-sets/{body['grasp_set']}").json()
             assert gs["format"] == "graspgen.grasp_set/1"
+            # the review page ships in the wheel: the page, its assets, and (with a browser here) the set in 3D
+            page = c.get("/ui/")
+            assert page.status_code == 200 and "text/html" in page.headers["content-type"], page.text[:300]
+            for asset in re.findall(r'(?:src|href)="\./(assets/[^"]+)"', page.text):
+                assert c.get(f"/ui/{asset}").status_code == 200, asset
+            _review_page_draws(url, token, body["grasp_set"])
     finally:
         stop_process(proc)
     assert os.path.exists(var / "graspgen.sqlite3")
+
+
+def _review_page_draws(url: str, token: str, set_id: int) -> None:
+    """The wheel's /ui/ in Chromium draws the set (skipped, as the browser tests are, without Chromium)."""
+    from tests.ui.browser import drawn_share, launch, missing
+
+    if missing():
+        return
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        browser = launch(p)
+        try:
+            page = browser.new_page(viewport={"width": 1280, "height": 800})
+            errors: list[str] = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(f"{url}/ui/#/set/{set_id}")
+            page.get_by_label("Access token").fill(token)
+            page.get_by_role("button", name="Use token").click()
+            page.locator(".viewer[data-state=complete]").wait_for(timeout=120_000)
+            assert drawn_share(page.locator(".viewer canvas").screenshot()) > 0.02
+            assert errors == []
+        finally:
+            browser.close()
