@@ -408,14 +408,18 @@ def _filter(
     per_plane: list[int] = []
     for j in range(P):
         n_obj = R_wo.T @ normals[j]  # the plane normal in the object frame; m = (X.n, Y.n, Z.n) in the grasp frame
-        mx, my, mz = np.abs(_dot(sub[0:3], n_obj)), np.abs(_dot(sub[3:6], n_obj)), _dot(sub[6:9], n_obj)
         h0 = _dot(sub[9:12], n_obj)
         h0 += normals[j] @ t_wo - offsets[j]  # the grasp origin's height above the plane
-        h_pre = h0 - distance * mz  # the pre-grasp origin's
-        side, palm = solids.plane_offsets(mx, my, mz)
-        lowest = np.minimum(h0 - mx * grasp_reach, h_pre - mx * open_reach) - side
-        if palm is not None:
-            lowest = np.minimum(lowest, np.minimum(h0, h_pre) + palm)
+        if solids.meshes is not None:
+            m = np.stack([_dot(sub[0:3], n_obj), _dot(sub[3:6], n_obj), _dot(sub[6:9], n_obj)], axis=1)
+            lowest = _lowest_of_meshes(solids, m, h0, h0 - distance * m[:, 2], width / 2, solids.open_width(width) / 2)
+        else:
+            mx, my, mz = np.abs(_dot(sub[0:3], n_obj)), np.abs(_dot(sub[3:6], n_obj)), _dot(sub[6:9], n_obj)
+            h_pre = h0 - distance * mz  # the pre-grasp origin's
+            side, palm = solids.plane_offsets(mx, my, mz)
+            lowest = np.minimum(h0 - mx * grasp_reach, h_pre - mx * open_reach) - side
+            if palm is not None:
+                lowest = np.minimum(lowest, np.minimum(h0, h_pre) + palm)
         inside = lowest >= -PLANE_TOLERANCE
         per_plane.append(n_cone - int(np.count_nonzero(inside)))
         clear &= inside
@@ -425,6 +429,37 @@ def _filter(
         ok[inside_cone[~clear]] = False
     removed = {"approach": removed_cone, "planes": n_cone - int(np.count_nonzero(clear)), "per_plane": per_plane}
     return ok, cos_z, removed
+
+
+#: pairs per block of the mesh gripper's lowest-point products ((block, hull vertices) floats each)
+_MESH_BLOCK = 65_536
+
+
+def _lowest_of_meshes(
+    solids: Any, m: np.ndarray, h0: np.ndarray, h_pre: np.ndarray, half: np.ndarray, half_open: np.ndarray
+) -> np.ndarray:
+    """The height above a plane of the lowest point of a gripper from CAD, per pair (k,): the fingers at the grasp
+    (origin height h0, half width `half`) and at the pre-grasp (h_pre, half the opening), the body at both. m (k, 3):
+    the plane's normal along the grasp frame's X, Y, Z. A mesh's lowest point along a direction is a vertex of its
+    convex hull: the minimum over those, exact."""
+    left, right = solids.finger_hulls()
+    body = solids.meshes.body.hull_vertices if solids.meshes.body is not None else None
+    flip = np.array([-1.0, -1.0, 1.0])  # the -X finger is turned half a turn about Z
+    out = np.empty(len(m))
+    for a in range(0, len(m), _MESH_BLOCK):
+        mb = m[a : a + _MESH_BLOCK]
+        r = (mb @ right.T).min(axis=1)
+        lf = ((mb * flip) @ left.T).min(axis=1)
+        mx = mb[:, 0]
+        sl = slice(a, a + len(mb))
+        at = np.minimum(mx * half[sl] + r, -mx * half[sl] + lf)
+        opened = np.minimum(mx * half_open[sl] + r, -mx * half_open[sl] + lf)
+        low = np.minimum(h0[sl] + at, h_pre[sl] + opened)
+        if body is not None:
+            b = (mb @ body.T).min(axis=1)
+            low = np.minimum(low, np.minimum(h0[sl], h_pre[sl]) + b)
+        out[sl] = low
+    return out
 
 
 def _best(index: PickIndex, ok: np.ndarray, cos_z: np.ndarray, limit: int) -> np.ndarray:

@@ -17,7 +17,7 @@ from . import antipodal, clustering, libm, quality, sampling
 from . import collision as _collision
 from . import hold as _hold
 from .coverage import coverage
-from .errors import InvalidParameterError, InvalidUnitsError
+from .errors import InvalidMeshError, InvalidParameterError, InvalidUnitsError
 from .export import Candidates, GraspSet
 from .gripper import GripperSpec
 from .params import Params, QualityOptions, from_keywords, keyword_parameters
@@ -91,10 +91,12 @@ def generate(
     report = progress or _noop
     params, options = from_keywords("generate", run_params, (Params, params), (QualityOptions, options))
     spec = gripper if isinstance(gripper, GripperSpec) else GripperSpec.from_dict(gripper)
+    _check_geometry_params(spec, params)
     mu = spec.friction if params.friction is None else params.friction
     run = _Run(spec, params, options, mu, report, timings={}, started=time.perf_counter())
 
     loaded = _load(run, mesh_or_path, units, object_name)
+    _check_geometry_part(spec, loaded.part)
     surface = _sample(run, loaded.part)
     pairs = _pairs(run, surface)
     collided = _collide(run, surface, pairs)  # (d) against the points
@@ -860,7 +862,28 @@ def _length_scale(part: Part) -> float:
 
 
 def _patch_radius(spec: GripperSpec) -> float:
-    return min(spec.finger_width, spec.finger_depth) / 2
+    """The radius of the disc the pad presses with: half the pad's smaller side."""
+    return min(spec.solids().pad) / 2
+
+
+def _check_geometry_params(spec: GripperSpec, params: Params) -> None:
+    """A gripper from CAD grasps from outside: the contract's finger frame describes the pad on the inner face only."""
+    if spec.geometry is not None and params.inside:
+        raise InvalidParameterError(
+            "inside grasps need box fingers: a CAD finger's pad is on its inner face (CONTRACT.md, finger frame), "
+            "and what touches the part from inside is not described",
+            field="inside",
+        )
+
+
+def _check_geometry_part(spec: GripperSpec, part: Part) -> None:
+    """Criterion (d) with CAD fingers tests them against the part's triangles: a point cloud has none."""
+    if spec.geometry is not None and part.mesh is None:
+        raise InvalidMeshError(
+            "a gripper from CAD is checked against the part's triangles, and a point cloud has none: give the part "
+            "as a mesh (a scan meshed, or the CAD model)",
+            field="file",
+        )
 
 
 def _export_terms(cands: Candidates, idx, extras: _Extras, spec: GripperSpec, mu: float, params: Params):

@@ -78,6 +78,10 @@ def _log_validation(stream, result) -> None:
 
     if not any("sim" in g for g in result.grasps):
         return
+    if result.gripper.geometry is not None:
+        colours = [SIM_COLOURS[bool(g["sim"]["success"])] if "sim" in g else None for g in result.grasps]
+        _log_gripper_meshes(stream, "grasps/validation", result, colours)
+        return
     centers, half, quats, colours, names = [], [], [], [], []
     for rank, g in enumerate(result.grasps):
         sim = g.get("sim")
@@ -142,6 +146,11 @@ def _log(stream, result, points, normals, extra) -> None:
             rr.Points3D(cands.midpoints[idx], radii=0.0003, colors=cluster_colours(labels), class_ids=labels),
             static=True,
         )
+    if result.gripper.geometry is not None:
+        _log_gripper_meshes(
+            stream, "grasps/grippers", result, [cluster_colours(np.array([g["cluster"][0]]))[0] for g in result.grasps]
+        )
+        return
     centers, half, quats, colours, names = [], [], [], [], []
     for rank, g in enumerate(result.grasps):
         T = np.asarray(g["pose"])
@@ -179,3 +188,32 @@ def _log(stream, result, points, normals, extra) -> None:
         rr.TextDocument("```json\n" + json.dumps(summary, indent=1) + "\n```", media_type=rr.MediaType.MARKDOWN),
         static=True,
     )
+
+
+def _log_gripper_meshes(stream, path: str, result, colours: list) -> None:
+    """A gripper from CAD at every grasp (colour None: left out) as one Mesh3D of its real finger and body meshes."""
+    import rerun as rr
+
+    solids = result.gripper.solids()
+    verts, faces, cols = [], [], []
+    offset = 0
+    for g, colour in zip(result.grasps, colours, strict=True):
+        if colour is None:
+            continue
+        T = np.asarray(g["pose"], dtype=np.float64)
+        for m in solids.trimeshes(float(g["width"])):
+            v = np.asarray(m.vertices) @ T[:3, :3].T + T[:3, 3]
+            verts.append(v)
+            faces.append(np.asarray(m.faces) + offset)
+            cols.append(np.tile(np.asarray(colour)[:3], (len(v), 1)))
+            offset += len(v)
+    if verts:
+        stream.log(
+            path,
+            rr.Mesh3D(
+                vertex_positions=np.vstack(verts),
+                triangle_indices=np.vstack(faces),
+                vertex_colors=np.vstack(cols).astype(np.uint8),
+            ),
+            static=True,
+        )

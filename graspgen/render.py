@@ -84,9 +84,15 @@ def _raster(xy, depth_v, faces, colours, zbuf, img):
 
 
 def gripper_triangles(spec: GripperSpec, T_object_grasp: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (v, 3) and faces (f, 3) of the gripper's boxes (fingers at `width`, palm) in the object frame."""
+    """Vertices (v, 3) and faces (f, 3) of the gripper's solids (fingers at `width`, palm or body: boxes, or the
+    meshes of a gripper from CAD) in the object frame."""
     verts, faces = [], []
-    for box in spec.boxes(width):
+    solids = spec.solids()
+    if solids.meshes is not None:
+        for m in solids.trimeshes(width):
+            faces.append(np.asarray(m.faces) + sum(len(x) for x in verts))
+            verts.append(np.asarray(m.vertices) @ T_object_grasp[:3, :3].T + T_object_grasp[:3, 3])
+    for box in spec.boxes(width) if solids.meshes is None else ():
         b = trimesh.creation.box(extents=box.extents)
         v = b.vertices + np.asarray(box.center)
         faces.append(b.faces + sum(len(x) for x in verts))

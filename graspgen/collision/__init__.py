@@ -2,21 +2,26 @@
 against the part's sampled points and against its triangles.
 
 - `_solids`: the gripper's solids in the grasp frame, read from a GripperSpec (collision, pick, previews,
-  recordings and validation all use them).
+  recordings and validation all use them); `_meshsolid`: a solid given as a closed mesh (fingers and bodies from
+  CAD), `_shapes`: boxes.
 - `_regions`: the regions of criterion (d) (`collision_model`) and their table as the kernels read it.
 - `_points`: the point kernel (free_rolls): every roll of every candidate against the sampled points.
 - `_hull`: the sample's convex hull, a certificate that the palm is clear at a roll.
-- `_triangles`: the part's triangle tree, the mesh-exact check (mesh_free_rolls) and normals near a point.
+- `_tritree`: the part's triangle tree, the exact triangle tests, normals near a point.
+- `_triangles`: the mesh-exact check (mesh_free_rolls).
 - `_frame`, `_bits`: the candidate's roll-0 frame and roll tables, roll masks.
 
 Design notes (why the walks are built as they are, why their bounds are exact): docs/design/collision.md.
 """
 
 from ._bits import MAX_ROLLS, any_free, popcount
+from ._meshsolid import MeshSet, MeshSolid, mesh_solid
 from ._points import STATS, free_rolls, free_rolls_of_pairs, free_rolls_stats
 from ._regions import CollisionModel, Region, approach_reach, collision_model
-from ._solids import Box, Cuboid, GripperSolids
-from ._triangles import MeshTree, build_tree, mesh_free_rolls, mesh_free_rolls_of_pairs, normal_spread_rad
+from ._shapes import Box, Cuboid
+from ._solids import GripperSolids
+from ._triangles import mesh_free_rolls, mesh_free_rolls_of_pairs
+from ._tritree import MeshTree, build_tree, normal_spread_rad
 
 __all__ = [
     "MAX_ROLLS",
@@ -25,6 +30,8 @@ __all__ = [
     "CollisionModel",
     "Cuboid",
     "GripperSolids",
+    "MeshSet",
+    "MeshSolid",
     "MeshTree",
     "Region",
     "any_free",
@@ -36,6 +43,7 @@ __all__ = [
     "free_rolls_stats",
     "mesh_free_rolls",
     "mesh_free_rolls_of_pairs",
+    "mesh_solid",
     "normal_spread_rad",
     "popcount",
 ]

@@ -772,7 +772,7 @@ def _prepare(P: np.ndarray, N: np.ndarray | None, model: CollisionModel, rolls: 
     grid = np.array([lo[0], lo[1], lo[2], 1.0 / h, dims[0], dims[1], dims[2]], dtype=np.float64)
     # one memo per thread: shared cells that both threads keep rewriting cost more than the hits they share
     cells = np.full((numba.config.NUMBA_NUM_THREADS, 2, int(np.prod(dims)), _MEMO_SLOTS), -1, dtype=np.int64)
-    regions = region_table(model)
+    regions = region_table(model, prefilter=True)
     rows = regions.rows
     fixed = rows[FINGER_ROWS:]
     threshold = -float(np.max(fixed[:, ZHI])) - 4.0 * pad if len(fixed) else 0.0

@@ -28,7 +28,9 @@ import numpy as np
 from numba import njit
 
 from ..params import TOLERANCES, Tolerances
+from ._meshsolid import MeshSet
 from ._solids import BoxGripper, GripperSolids
+from ._tritree import empty_tree
 
 __all__ = ["Region", "CollisionModel", "collision_model", "approach_reach", "Regions", "region_table", "FINGER_ROWS"]
 
@@ -38,9 +40,11 @@ __all__ = ["Region", "CollisionModel", "collision_model", "approach_reach", "Reg
 # RMIN, RMAX: the radial band around the closing axis that holds the region's (y, z) rectangle at every roll; RIN:
 # the radius of the disc around the axis that the rectangle covers at every roll (0 when it does not hold the
 # axis); RMIN2, RMAX2, RIN2: the same squared, widened by the point tests' relative guard band (RIN2 = -1: no such
-# disc); SYM: 1 when the rectangle is symmetric under a half turn about X (roll k + R/2 covers what roll k does).
-MOVES, X0, X1, YC, HY, ZLO, ZHI, RMIN, RMAX, RIN, RMIN2, RMAX2, RIN2, SYM = range(14)
-COLUMNS = 14
+# disc); SYM: 1 when the rectangle is symmetric under a half turn about X (roll k + R/2 covers what roll k does);
+# SOLID: -1 for a box region, else the index of its mesh solid in CollisionModel.solid_records() (the region's box
+# is then the solid's bounding box, and the triangle kernel tests the solid itself where a triangle meets it).
+MOVES, X0, X1, YC, HY, ZLO, ZHI, RMIN, RMAX, RIN, RMIN2, RMAX2, RIN2, SYM, SOLID = range(15)
+COLUMNS = 15
 
 #: rows 0 and 1 of a region table are the -X and the +X finger, one box each (a compile-time constant of the
 #: kernels: their loops over the fingers unroll); the fixed regions follow
@@ -54,11 +58,13 @@ Regions = namedtuple("Regions", ["rows", "travel"])
 @dataclass(frozen=True)
 class Region:
     """A box of criterion (d): `moves` -1 / +1 (the -X / +X finger; lo, hi in that finger's frame) or 0 (fixed; lo,
-    hi in the grasp frame), metres."""
+    hi in the grasp frame), metres. `solid` >= 0: the region is that mesh solid (model.meshes), lo and hi its
+    bounding box."""
 
     moves: int
     lo: tuple[float, float, float]
     hi: tuple[float, float, float]
+    solid: int = -1
 
 
 @dataclass(frozen=True)
@@ -74,6 +80,19 @@ class CollisionModel:
     #: extra opening before closing (0 in `paper` mode: the fingers are tested at the contacts only)
     clearance: float
     inner_margin: float
+    #: the mesh solids the regions name (left finger, right finger, body; None where there is none), or None for a
+    #: gripper of boxes
+    meshes: MeshSet | None = None
+    #: what the point kernel tests instead of `regions` when they hold mesh solids: boxes inside the solids (a
+    #: sampled point in one is in the solid) and the box regions; None: the regions themselves
+    prefilter: tuple[Region, ...] | None = None
+
+    def solid_records(self) -> tuple:
+        """The mesh solids as the triangle kernel reads them: a tuple of three TriangleTrees (empty where none)."""
+        if self.meshes is None:
+            e = empty_tree()
+            return (e, e, e)
+        return self.meshes.records()
 
     @property
     def palm(self) -> Region | None:
@@ -87,23 +106,40 @@ def collision_model(
 ) -> CollisionModel:
     """The regions of criterion (d) for `gripper` in `mode` (`swept` or `paper`). `reach` (m; `swept` only): how
     far behind the fingers' base the approach region extends, at least the largest distance from a grasp's
-    midpoint to any point of the part (approach_reach); 0 tests the palm box alone."""
+    midpoint to any point of the part (approach_reach); 0 tests the palm box alone. A gripper with finger and body
+    meshes (GripperSpec.geometry) gets mesh regions (the solids themselves, exact) and, for the point kernel, the
+    boxes inside them."""
     solids = GripperSolids.of(gripper)
-    finger = solids.finger
-    regions = [Region(-1, finger.lo, finger.hi), Region(1, finger.lo, finger.hi)]
-    if mode == "swept":
-        approach = solids.approach(reach)
-        if approach is not None:
-            regions.append(Region(0, approach.lo, approach.hi))
-    return CollisionModel(
+    meshes = solids.meshes
+    common = dict(
         mode=mode,
-        regions=tuple(regions),
         finger_thickness=solids.finger_thickness,
         stroke=solids.stroke,
         min_width=solids.min_width,
         clearance=solids.clearance if mode == "swept" else 0.0,
         inner_margin=tolerances.inner_margin,
     )
+    approach = solids.approach(reach) if mode == "swept" else None
+    fixed = [Region(0, approach.lo, approach.hi)] if approach is not None else []
+    if meshes is None:
+        finger = solids.finger
+        regions = [Region(-1, finger.lo, finger.hi), Region(1, finger.lo, finger.hi), *fixed]
+        return CollisionModel(regions=tuple(regions), **common)
+    left, right, body = meshes.left, meshes.right, meshes.body
+    regions = [Region(-1, left.bounds.lo, left.bounds.hi, 0), Region(1, right.bounds.lo, right.bounds.hi, 1), *fixed]
+    prefilter = [_inner_region(-1, left), _inner_region(1, right), *fixed]
+    if body is not None and mode == "swept":
+        regions.append(Region(0, body.bounds.lo, body.bounds.hi, 2))
+        if body.inner is not None:
+            prefilter.append(Region(0, body.inner.lo, body.inner.hi))
+    return CollisionModel(regions=tuple(regions), meshes=meshes, prefilter=tuple(prefilter), **common)
+
+
+def _inner_region(moves: int, solid) -> Region:
+    """The point kernel's region for a mesh finger: its inner box, or a box that holds nothing (x from 1 km on)."""
+    if solid.inner is not None:
+        return Region(moves, solid.inner.lo, solid.inner.hi)
+    return Region(moves, (1.0e3, 0.0, 0.0), (1.0e3, 0.0, 0.0))
 
 
 def approach_reach(points: np.ndarray) -> float:
@@ -113,14 +149,16 @@ def approach_reach(points: np.ndarray) -> float:
     return 1.05 * float(np.linalg.norm(np.ptp(pts, axis=0))) if len(pts) else 0.0
 
 
-def region_table(model: CollisionModel, guard: float = TOLERANCES.guard) -> Regions:
-    """The model's regions as the kernels' table (see the column names above); `guard` widens the squared radial
-    bounds relatively (the point tests' shortcuts keep this band and fall back to the exact test inside it)."""
+def region_table(model: CollisionModel, guard: float = TOLERANCES.guard, *, prefilter: bool = False) -> Regions:
+    """The model's regions as the kernels' table (see the column names above): its exact regions, or (`prefilter`)
+    what the point kernel tests; `guard` widens the squared radial bounds relatively (the point tests' shortcuts
+    keep this band and fall back to the exact test inside it)."""
     lo_g, hi_g = 1.0 - guard, 1.0 + guard
     rows = []
-    if [r.moves for r in model.regions if r.moves != 0] != [-1, 1]:
+    regions = model.prefilter if prefilter and model.prefilter is not None else model.regions
+    if [r.moves for r in regions if r.moves != 0] != [-1, 1]:
         raise ValueError("a collision model has one region for each finger, the -X finger's first")
-    for reg in sorted(model.regions, key=lambda r: r.moves == 0):
+    for reg in sorted(regions, key=lambda r: r.moves == 0):
         ylo, yhi = reg.lo[1], reg.hi[1]
         yc, hy = (ylo + yhi) / 2, (yhi - ylo) / 2
         if reg.moves < 0:  # the -X finger is turned half a turn about Z: y -> -y
@@ -139,7 +177,7 @@ def region_table(model: CollisionModel, guard: float = TOLERANCES.guard) -> Regi
             r_in, r_in2 = 0.0, -1.0
         sym = 1.0 if yc == 0.0 and zlo == -zhi else 0.0
         row = [float(reg.moves), reg.lo[0], reg.hi[0], yc, hy, zlo, zhi, r_min, r_max, r_in]
-        rows.append(row + [r_min * r_min * lo_g, r_max * r_max * hi_g, r_in2, sym])
+        rows.append(row + [r_min * r_min * lo_g, r_max * r_max * hi_g, r_in2, sym, float(reg.solid)])
     travel = np.array([model.finger_thickness, model.stroke, model.min_width, model.clearance, model.inner_margin])
     table = np.array(rows, dtype=np.float64).reshape(-1, COLUMNS)
     return Regions(table, travel)
@@ -173,6 +211,25 @@ def finger_x_ranges(xr, inside, w, regions):
             xr[r, 0], xr[r, 1] = -hi, -lo
         else:
             xr[r, 0], xr[r, 1] = lo, hi
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def finger_travel(inside, w, regions):
+    """(s, L) of a finger for a candidate of closing width `w`: its frame lies at s from the midpoint (less the
+    inner margin's clearance of the contact) at the contact end of its travel, and moves away from the part by L >= 0
+    to the pre-grasp opening (0 in `paper` mode)."""
+    t, stroke, min_width, clearance, margin = (
+        regions.travel[0],
+        regions.travel[1],
+        regions.travel[2],
+        regions.travel[3],
+        regions.travel[4],
+    )
+    if not inside:
+        s = w / 2 + margin
+        return s, max(max(min(w + clearance, stroke), w) / 2 - s, 0.0)
+    s = w / 2 - margin
+    return s, max(s - min(max(w - clearance, min_width + 2 * t), w) / 2, 0.0)
 
 
 @njit(cache=True, inline="always", error_model="numpy")

@@ -1,13 +1,9 @@
-"""The part's own triangles: a bounding-volume tree over them and the exact queries that the sampled points cannot
-answer.
+"""The mesh-exact check, criterion (d) against the part's own triangles (`mesh_free_rolls`).
 
-- `normal_spread_rad`: for each sample point, the largest angle between its normal and the normal of any triangle
-  within `position_tolerance` of it. Criterion (c) with a position tolerance then asks the friction cone to hold
-  for every one of them: a contact on or next to an edge is not taken for a point on a face.
-- `mesh_free_rolls`: criterion (d) against the triangles themselves. The point test can miss a feature that falls
-  between samples; here every roll the point test left free is tested again, exactly, with the same regions: a roll
-  stays free only when no triangle meets any region at that roll (closed boxes; the separating-axis test of a
-  triangle against a box, Akenine-Moeller).
+The point test can miss a feature that falls between samples; here every roll it left free is tested again,
+exactly: a roll stays free only when no triangle of the part meets any region at that roll (a box region: the closed
+box, by Akenine-Moeller's separating axes; a mesh region, a finger or body from CAD: the solid itself over the
+finger's travel, _tritree.tri_meets_solid).
 
 Exactness: every node test only prunes, with a guard band (Tolerances.guard of the part's size) far beyond rounding;
 the answer is the triangle test's, so the masks are those of testing every triangle at every roll
@@ -34,378 +30,56 @@ from ._frame import (
 from ._regions import (
     FINGER_ROWS,
     HY,
+    MOVES,
     RMAX,
     RMIN,
+    SOLID,
     YC,
     ZHI,
     ZLO,
     CollisionModel,
+    finger_travel,
     finger_x_ranges,
     fixed_x_ranges,
     region_table,
 )
+from ._tritree import (
+    COUNT,
+    LEAF,
+    LEFT,
+    M_C,
+    M_H,
+    M_OAX,
+    M_OC,
+    M_OH,
+    M_R,
+    RIGHT,
+    START,
+    MeshTree,
+    tri_box,
+    tri_meets_solid,
+)
 
-__all__ = ["MeshTree", "build_tree", "normal_spread_rad", "mesh_free_rolls", "mesh_free_rolls_of_pairs"]
+__all__ = ["mesh_free_rolls", "mesh_free_rolls_of_pairs"]
 
-#: at most this many triangles per leaf
-_LEAF = 4
 #: candidates per unit of parallel work
 _CHUNK = 256
-#: nodes of at most this many triangles keep their distinct vertices, for the exact range along the axis (_walk)
-EXACT_TRIANGLES = 64
 #: per size class above the leaves, that range is taken while it has turned a finger away at least at every other
 #: try (counted per thread and chunk, after the first _EXACT_TRIES tries)
 _EXACT_TRIES = 32
 
-# A node's columns: the axis-aligned box's centre, the radius of the ball around that centre holding the node's
-# triangles, the box's half extents, (unused), then the oriented box of the node's vertices: centre, three unit axes
-# as rows (principal first), half extents. The oriented box is not padded: the queries pad.
-M_C, M_R, M_H, M_OC, M_OAX, M_OH = 0, 3, 4, 8, 11, 20
-_NODE = 23
-# A node's links: children (-1: a leaf) and its triangles [START, START + COUNT) of the tree's order.
-LEFT, RIGHT, START, COUNT = 0, 1, 2, 3
-
-#: the tree as the kernels read it: triangles (m, 3, 3), verts (3, total) with vstart (nodes + 1,) (a node's
-#: distinct vertices), nodes (k, _NODE), children (k, 4).
-TriangleTree = namedtuple("TriangleTree", ["triangles", "vstart", "verts", "nodes", "children"])
 #: a thread's working arrays of the mesh-exact walk: F (12,) the candidate's midpoint, X, Y0, Z0; rx (r, 2) the
 #: regions' bounds along X; boxes_c, boxes_e (r, 3) their centres and half extents in a roll's grasp frame; rot
 #: (R, 6) each roll's Y and Z in the object frame; tri (2, 3, 3) a triangle in the roll-0 frame and at a roll; stack
 #: (128,) nodes; masks (128, r) per stack entry and region the rolls to test; hit (r,); ob (15,) a node's oriented box
 #: in the roll-0 frame; tally (8, 2) per size class the exact ranges taken and the fingers they turned away.
+#: travel (2,): the fingers' (s, L) for a mesh finger (tri_meets_solid); solid_tri (3, 3), solid_stack (128,): the
+#: scratch of tri_meets_solid.
 MeshWork = namedtuple(
-    "MeshWork", ["F", "rx", "boxes_c", "boxes_e", "rot", "tri", "stack", "masks", "hit", "ob", "tally"]
+    "MeshWork",
+    ["F", "rx", "boxes_c", "boxes_e", "rot", "tri", "stack", "masks", "hit", "ob", "tally", "travel", "solid_tri"]
+    + ["solid_stack"],
 )
-
-
-class MeshTree:
-    """Triangles (m, 3, 3) metres, their unit normals (m, 3), and the tree's arrays (see `build_tree`): per node the
-    box data (columns M_*) and (left, right, start, count); for nodes of at most `EXACT_TRIANGLES` triangles their
-    distinct vertices, verts[:, vstart[k]:vstart[k + 1]] (3, .) (none for larger nodes)."""
-
-    def __init__(
-        self,
-        triangles: np.ndarray,
-        normals: np.ndarray,
-        nodes: np.ndarray,
-        children: np.ndarray,
-        vstart: np.ndarray,
-        verts: np.ndarray,
-    ):
-        self.triangles = triangles
-        self.normals = normals
-        self.nodes = nodes
-        self.children = children
-        self.vstart = vstart
-        self.verts = verts
-
-    def __len__(self) -> int:
-        return len(self.triangles)
-
-    def record(self) -> TriangleTree:
-        """The arrays the kernels read."""
-        return TriangleTree(self.triangles, self.vstart, self.verts, self.nodes, self.children)
-
-
-def build_tree(vertices: np.ndarray, faces: np.ndarray) -> MeshTree:
-    """A tree over the mesh's non-degenerate triangles. `vertices` (v, 3) float64 metres, `faces` (m, 3) int."""
-    V = np.asarray(vertices, dtype=np.float64)
-    F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    tri = V[F]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    area2 = np.linalg.norm(n, axis=1)
-    keep = area2 > 1e-20
-    tri, n, area2 = tri[keep], n[keep], area2[keep]
-    n = n / area2[:, None]
-    m = len(tri)
-    max_nodes = 2 * m + 1
-    order = np.arange(m, dtype=np.int64)
-    nodes = np.zeros((max_nodes, _NODE), dtype=np.float64)
-    children = np.zeros((max_nodes, 4), dtype=np.int64)
-    count = _build(np.ascontiguousarray(tri), order, nodes, children) if m else 0
-    tri = np.ascontiguousarray(tri[order])
-    n = np.ascontiguousarray(n[order])
-    children = children[:count].copy()
-    vstart, verts = _node_vertices(np.ascontiguousarray(F[keep][order]), V, children, EXACT_TRIANGLES)
-    return MeshTree(tri, n, nodes[:count].copy(), children, vstart, verts)
-
-
-@njit(cache=True)
-def _node_vertices(faces, V, children, max_triangles):
-    """The distinct vertices (by index) of each node of at most `max_triangles` triangles, in (3, total) SoA with
-    offsets per node: a stamp per vertex index marks the ones a node has listed already."""
-    nn = children.shape[0]
-    vstart = np.zeros(nn + 1, dtype=np.int64)
-    stamp = np.full(V.shape[0], -1, dtype=np.int64)
-    for k in range(nn):
-        c = 0
-        if children[k, COUNT] <= max_triangles:
-            for t in range(children[k, START], children[k, START] + children[k, COUNT]):
-                for j in range(3):
-                    v = faces[t, j]
-                    if stamp[v] != k:
-                        stamp[v] = k
-                        c += 1
-        vstart[k + 1] = vstart[k] + c
-    verts = np.empty((3, vstart[nn]))
-    stamp[:] = -1
-    for k in range(nn):
-        q = vstart[k]
-        if children[k, COUNT] <= max_triangles:
-            for t in range(children[k, START], children[k, START] + children[k, COUNT]):
-                for j in range(3):
-                    v = faces[t, j]
-                    if stamp[v] != k:
-                        stamp[v] = k
-                        verts[0, q], verts[1, q], verts[2, q] = V[v, 0], V[v, 1], V[v, 2]
-                        q += 1
-    return vstart, verts
-
-
-@njit(cache=True)
-def _build(T, order, nodes, children):
-    """Fill nodes[k] (columns M_*) and children[k] = (left, right, start, count) by median splits of the triangles'
-    centroids along the longest axis of their extent, at most _LEAF triangles per leaf; leaves have left = -1.
-    Returns the node count. The oriented box suits the long thin triangles of curved walls (an arc's axis-aligned
-    box sticks out far beyond it)."""
-    m = T.shape[0]
-    cen = np.empty((m, 3))
-    for t in range(m):
-        for a in range(3):
-            cen[t, a] = (T[t, 0, a] + T[t, 1, a] + T[t, 2, a]) / 3.0
-    stack = np.empty((128, 3), dtype=np.int64)  # node, start, stop
-    stack[0, 0], stack[0, 1], stack[0, 2] = 0, 0, m
-    top = 1
-    count = 1
-    while top > 0:
-        top -= 1
-        k, a0, b0 = stack[top, 0], stack[top, 1], stack[top, 2]
-        lo = np.full(3, np.inf)
-        hi = np.full(3, -np.inf)
-        clo = np.full(3, np.inf)
-        chi = np.full(3, -np.inf)
-        for q in range(a0, b0):
-            t = order[q]
-            for v in range(3):
-                for a in range(3):
-                    lo[a] = min(lo[a], T[t, v, a])
-                    hi[a] = max(hi[a], T[t, v, a])
-            for a in range(3):
-                clo[a] = min(clo[a], cen[t, a])
-                chi[a] = max(chi[a], cen[t, a])
-        c = 0.5 * (lo + hi)
-        r2 = 0.0
-        for q in range(a0, b0):
-            t = order[q]
-            for v in range(3):
-                d = (T[t, v, 0] - c[0]) ** 2 + (T[t, v, 1] - c[1]) ** 2 + (T[t, v, 2] - c[2]) ** 2
-                r2 = max(r2, d)
-        nodes[k, M_C], nodes[k, M_C + 1], nodes[k, M_C + 2] = c[0], c[1], c[2]
-        nodes[k, M_R] = np.sqrt(r2) * (1.0 + 1e-12) + 1e-15
-        for a in range(3):
-            nodes[k, M_H + a] = 0.5 * (hi[a] - lo[a])
-        _oriented_box(T, order, a0, b0, nodes[k])
-        children[k, START], children[k, COUNT] = a0, b0 - a0
-        if b0 - a0 <= _LEAF:
-            children[k, LEFT], children[k, RIGHT] = -1, -1
-            continue
-        axis = 0
-        if chi[1] - clo[1] > chi[axis] - clo[axis]:
-            axis = 1
-        if chi[2] - clo[2] > chi[axis] - clo[axis]:
-            axis = 2
-        seg = order[a0:b0]
-        keys = cen[seg, axis]
-        idx = np.argsort(keys, kind="mergesort")
-        order[a0:b0] = seg[idx]
-        mid = (a0 + b0) // 2
-        left, right = count, count + 1
-        count += 2
-        children[k, LEFT], children[k, RIGHT] = left, right
-        stack[top, 0], stack[top, 1], stack[top, 2] = left, a0, mid
-        stack[top + 1, 0], stack[top + 1, 1], stack[top + 1, 2] = right, mid, b0
-        top += 2
-    return count
-
-
-@njit(cache=True)
-def _oriented_box(T, order, a0, b0, out):
-    """The oriented box of the vertices of triangles T[order[a0:b0]] into out[M_OC:] (see _build): axes by principal
-    components, bounds by projection."""
-    cnt = 3 * (b0 - a0)
-    mean = np.zeros(3)
-    for q in range(a0, b0):
-        for v in range(3):
-            for a in range(3):
-                mean[a] += T[order[q], v, a]
-    mean /= cnt
-    cov = np.zeros((3, 3))
-    for q in range(a0, b0):
-        for v in range(3):
-            for a in range(3):
-                for b in range(3):
-                    cov[a, b] += (T[order[q], v, a] - mean[a]) * (T[order[q], v, b] - mean[b])
-    _, V = np.linalg.eigh(cov)
-    lo = np.full(3, np.inf)
-    hi = np.full(3, -np.inf)
-    for q in range(a0, b0):
-        for v in range(3):
-            for i in range(3):
-                pr = 0.0
-                for a in range(3):
-                    pr += (T[order[q], v, a] - mean[a]) * V[a, 2 - i]
-                lo[i] = min(lo[i], pr)
-                hi[i] = max(hi[i], pr)
-    for a in range(3):
-        c = mean[a]
-        for i in range(3):
-            c += V[a, 2 - i] * 0.5 * (lo[i] + hi[i])
-        out[M_OC + a] = c
-    for i in range(3):
-        for a in range(3):
-            out[M_OAX + 3 * i + a] = V[a, 2 - i]
-        out[M_OH + i] = 0.5 * (hi[i] - lo[i])
-
-
-# -- normals within a distance -------------------------------------------------------------------------------------
-
-
-def normal_spread_rad(tree: MeshTree, points: np.ndarray, normals: np.ndarray, tolerance: float) -> np.ndarray:
-    """(k,) float64 radians: for each point, the largest angle between its normal and the normal of a triangle
-    within `tolerance` metres of it (0 when only faces parallel to its own are near)."""
-    P = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-    N = np.ascontiguousarray(normals, dtype=np.float64).reshape(-1, 3)
-    out = np.zeros(len(P), dtype=np.float64)
-    if len(P) == 0 or len(tree) == 0 or tolerance <= 0:
-        return out
-    _spread_kernel(P, N, tree.triangles, tree.normals, tree.nodes, tree.children, float(tolerance), out)
-    return out
-
-
-@njit(parallel=True, cache=True, error_model="numpy")
-def _spread_kernel(P, N, T, TN, nodes, children, tol, out):
-    for i in prange(P.shape[0]):
-        px, py, pz = P[i, 0], P[i, 1], P[i, 2]
-        lowest = 1.0
-        stack = np.empty(64, dtype=np.int64)
-        stack[0] = 0
-        top = 1
-        while top > 0:
-            top -= 1
-            k = stack[top]
-            dx = abs(px - nodes[k, M_C]) - nodes[k, M_H]
-            dy = abs(py - nodes[k, M_C + 1]) - nodes[k, M_H + 1]
-            dz = abs(pz - nodes[k, M_C + 2]) - nodes[k, M_H + 2]
-            d2 = max(dx, 0.0) ** 2 + max(dy, 0.0) ** 2 + max(dz, 0.0) ** 2
-            if d2 > tol * tol:
-                continue
-            if children[k, LEFT] < 0:
-                for t in range(children[k, START], children[k, START] + children[k, COUNT]):
-                    dot = TN[t, 0] * N[i, 0] + TN[t, 1] * N[i, 1] + TN[t, 2] * N[i, 2]
-                    if dot >= lowest:
-                        continue
-                    if _point_triangle_dist2(px, py, pz, T, t) <= tol * tol:
-                        lowest = dot
-            else:
-                stack[top] = children[k, LEFT]
-                stack[top + 1] = children[k, RIGHT]
-                top += 2
-        out[i] = np.arccos(max(-1.0, min(1.0, lowest)))
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _point_triangle_dist2(px, py, pz, T, t):
-    """Squared distance from p to triangle t (Ericson, Real-Time Collision Detection 5.1.5)."""
-    ax, ay, az = T[t, 0, 0], T[t, 0, 1], T[t, 0, 2]
-    bx, by, bz = T[t, 1, 0], T[t, 1, 1], T[t, 1, 2]
-    cx, cy, cz = T[t, 2, 0], T[t, 2, 1], T[t, 2, 2]
-    abx, aby, abz = bx - ax, by - ay, bz - az
-    acx, acy, acz = cx - ax, cy - ay, cz - az
-    apx, apy, apz = px - ax, py - ay, pz - az
-    d1 = abx * apx + aby * apy + abz * apz
-    d2 = acx * apx + acy * apy + acz * apz
-    if d1 <= 0.0 and d2 <= 0.0:
-        qx, qy, qz = ax, ay, az
-    else:
-        bpx, bpy, bpz = px - bx, py - by, pz - bz
-        d3 = abx * bpx + aby * bpy + abz * bpz
-        d4 = acx * bpx + acy * bpy + acz * bpz
-        cpx, cpy, cpz = px - cx, py - cy, pz - cz
-        d5 = abx * cpx + aby * cpy + abz * cpz
-        d6 = acx * cpx + acy * cpy + acz * cpz
-        vc = d1 * d4 - d3 * d2
-        vb = d5 * d2 - d1 * d6
-        va = d3 * d6 - d5 * d4
-        if d3 >= 0.0 and d4 <= d3:
-            qx, qy, qz = bx, by, bz
-        elif d6 >= 0.0 and d5 <= d6:
-            qx, qy, qz = cx, cy, cz
-        elif vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
-            v = d1 / (d1 - d3)
-            qx, qy, qz = ax + v * abx, ay + v * aby, az + v * abz
-        elif vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-            w = d2 / (d2 - d6)
-            qx, qy, qz = ax + w * acx, ay + w * acy, az + w * acz
-        elif va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
-            w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-            qx, qy, qz = bx + w * (cx - bx), by + w * (cy - by), bz + w * (cz - bz)
-        else:
-            denom = 1.0 / (va + vb + vc)
-            v = vb * denom
-            w = vc * denom
-            qx, qy, qz = ax + abx * v + acx * w, ay + aby * v + acy * w, az + abz * v + acz * w
-    return (px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2
-
-
-# -- regions against triangles ---------------------------------------------------------------------------------------
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _axis_test(p0, p1, p2, r):
-    return min(p0, p1, p2) > r or max(p0, p1, p2) < -r
-
-
-@njit(cache=True, error_model="numpy")
-def tri_box(v, c, e):
-    """Does the triangle v (3, 3) meet the closed axis-aligned box with centre c (3,) and half extents e (3,)?
-    (Akenine-Moeller's separating-axis test: the box's 3 axes, the triangle's normal, 9 edge cross products.)"""
-    x0, y0, z0 = v[0, 0] - c[0], v[0, 1] - c[1], v[0, 2] - c[2]
-    x1, y1, z1 = v[1, 0] - c[0], v[1, 1] - c[1], v[1, 2] - c[2]
-    x2, y2, z2 = v[2, 0] - c[0], v[2, 1] - c[1], v[2, 2] - c[2]
-    ex, ey, ez = e[0], e[1], e[2]
-    if min(x0, x1, x2) > ex or max(x0, x1, x2) < -ex:
-        return False
-    if min(y0, y1, y2) > ey or max(y0, y1, y2) < -ey:
-        return False
-    if min(z0, z1, z2) > ez or max(z0, z1, z2) < -ez:
-        return False
-    # edges
-    for k in range(3):
-        if k == 0:
-            fx, fy, fz = x1 - x0, y1 - y0, z1 - z0
-        elif k == 1:
-            fx, fy, fz = x2 - x1, y2 - y1, z2 - z1
-        else:
-            fx, fy, fz = x0 - x2, y0 - y2, z0 - z2
-        # a = ex_axis x f = (0, -fz, fy)
-        r = ey * abs(fz) + ez * abs(fy)
-        if _axis_test(-fz * y0 + fy * z0, -fz * y1 + fy * z1, -fz * y2 + fy * z2, r):
-            return False
-        # a = ey_axis x f = (fz, 0, -fx)
-        r = ex * abs(fz) + ez * abs(fx)
-        if _axis_test(fz * x0 - fx * z0, fz * x1 - fx * z1, fz * x2 - fx * z2, r):
-            return False
-        # a = ez_axis x f = (-fy, fx, 0)
-        r = ex * abs(fy) + ey * abs(fx)
-        if _axis_test(-fy * x0 + fx * y0, -fy * x1 + fx * y1, -fy * x2 + fx * y2, r):
-            return False
-    # the triangle's plane
-    nx = (y1 - y0) * (z2 - z0) - (z1 - z0) * (y2 - y0)
-    ny = (z1 - z0) * (x2 - x0) - (x1 - x0) * (z2 - z0)
-    nz = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
-    d = nx * x0 + ny * y0 + nz * z0
-    r = ex * abs(nx) + ey * abs(ny) + ez * abs(nz)
-    return abs(d) <= r
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -501,10 +175,12 @@ def _meets_finger_slab(masks, top, blocked, rx, x_lo, x_hi):
 
 
 @njit(cache=True, error_model="numpy")
-def _walk(todo, tree, regions, rolls, g, work):
+def _walk(todo, tree, regions, rolls, solids, g, work):
     """The rolls of `todo` at which some triangle meets some region, for the candidate in work.F (midpoint, X, Y0,
     Z0) with its regions in work.rx, work.boxes_c, work.boxes_e: one walk of the tree carrying, per region, the rolls
-    still to test. Its own function, called from the parallel loop (inlined in the loop's body it ran slower)."""
+    still to test. A region of a mesh solid (column SOLID: its index in `solids`) is the solid's bounding box for the
+    walk; a triangle that meets that box is tested against the solid itself (tri_meets_solid). Its own function,
+    called from the parallel loop (inlined in the loop's body it ran slower)."""
     F, rx, boxes_c, boxes_e, rot = work.F, work.rx, work.boxes_c, work.boxes_e, work.rot
     stack, masks, hit, ob, tally = work.stack, work.masks, work.hit, work.ob, work.tally
     T, vstart, verts, nodes, children = tree.triangles, tree.vstart, tree.verts, tree.nodes, tree.children
@@ -557,7 +233,7 @@ def _walk(todo, tree, regions, rolls, g, work):
             # while it pays: per size class, while it turns a finger away at least at every other try
             cls = 0
             c = children[k, COUNT]
-            while c > _LEAF:
+            while c > LEAF:
                 c >>= 1
                 cls += 1
             if cls == 0 or tally[cls, 0] < _EXACT_TRIES or 2 * tally[cls, 1] >= tally[cls, 0]:
@@ -636,7 +312,15 @@ def _walk(todo, tree, regions, rolls, g, work):
                         w[c, 1] = v[c, 1] * ck + v[c, 2] * sk
                         w[c, 2] = -v[c, 1] * sk + v[c, 2] * ck
                     if tri_box(w, boxes_c[r], boxes_e[r]):
-                        blocked |= bit
+                        sol = int(rows[r, SOLID])
+                        if sol < 0:
+                            blocked |= bit
+                        else:
+                            moves = int(rows[r, MOVES])
+                            s_at, sweep = (work.travel[0], work.travel[1]) if moves != 0 else (0.0, 0.0)
+                            solid = solids[0] if sol == 0 else (solids[1] if sol == 1 else solids[2])
+                            if tri_meets_solid(w, solid, moves, s_at, sweep, g, work.solid_tri, work.solid_stack):
+                                blocked |= bit
         if blocked == todo:
             break
     return blocked
@@ -657,7 +341,7 @@ def region_boxes(regions, rx, boxes_c, boxes_e):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _mesh_kernel(cands, free, tree, regions, rolls, g, nthreads):
+def _mesh_kernel(cands, free, tree, regions, rolls, left, right, body, g, nthreads):
     """Clear in free (n, R) bool every roll at which some triangle of the tree meets some region."""
     n = cands.inside.shape[0]
     R = rolls.cos.shape[0]
@@ -678,6 +362,9 @@ def _mesh_kernel(cands, free, tree, regions, rolls, g, nthreads):
             np.empty(nreg, dtype=np.uint64),
             np.empty(15),
             np.zeros((8, 2), dtype=np.int64),
+            np.zeros(2),
+            np.empty((3, 3)),
+            np.empty(128, dtype=np.int64),
         )
         F, rot = work.F, work.rot
         fixed_x_ranges(work.rx, regions)
@@ -697,10 +384,11 @@ def _mesh_kernel(cands, free, tree, regions, rolls, g, nthreads):
                     rot[rl, 0], rot[rl, 1], rot[rl, 2] = c * yx + s * zx, c * yy + s * zy, c * yz + s * zz
                     rot[rl, 3], rot[rl, 4], rot[rl, 5] = -s * yx + c * zx, -s * yy + c * zy, -s * yz + c * zz
                 finger_x_ranges(work.rx, cands.inside[i], wd, regions)
+                work.travel[0], work.travel[1] = finger_travel(cands.inside[i], wd, regions)
                 region_boxes(regions, work.rx, work.boxes_c, work.boxes_e)
                 F[0], F[1], F[2] = mx, my, mz
                 F[3], F[4], F[5], F[6], F[7], F[8], F[9], F[10], F[11] = ax, ay, az, yx, yy, yz, zx, zy, zz
-                blocked = _walk(todo, tree, regions, rolls, g, work)
+                blocked = _walk(todo, tree, regions, rolls, (left, right, body), g, work)
                 if blocked != 0:
                     for rl in range(R):
                         if blocked & (np.uint64(1) << np.uint64(rl)):
@@ -755,5 +443,7 @@ def _run(tree: MeshTree, cands, free, model: CollisionModel, switch: float | Non
     # the node tests' guard band: far beyond the rounding of the boxes' bounds and of the tests themselves
     g = TOLERANCES.guard * 2.0 * float(np.max(tree.nodes[0, M_H : M_H + 3])) + TOLERANCES.guard_floor
     with numba.parallel_chunksize(1):
-        _mesh_kernel(cands, out, tree.record(), region_table(model), rolls, g, numba.get_num_threads())
+        left, right, body = model.solid_records()
+        regions = region_table(model)
+        _mesh_kernel(cands, out, tree.record(), regions, rolls, left, right, body, g, numba.get_num_threads())
     return out

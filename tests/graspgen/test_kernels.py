@@ -535,7 +535,8 @@ def _mesh_free_rolls_brute(tree, mids, axes, widths, inside, model, rolls):
 
     from graspgen.collision._frame import roll0_basis
     from graspgen.collision._regions import finger_x_ranges, fixed_x_ranges, region_table
-    from graspgen.collision._triangles import region_boxes, tri_box
+    from graspgen.collision._triangles import region_boxes
+    from graspgen.collision._tritree import tri_box
     from graspgen.transforms import ROLL_REFERENCE_SWITCH
 
     @njit(cache=False)
@@ -592,7 +593,7 @@ def test_mesh_tree_lists_each_small_nodes_distinct_vertices():
     _EXACT_TRIANGLES triangles exactly the corners of its triangles, once each, and nothing for larger nodes (also
     with degenerate triangles dropped from the tree, which shift the faces' indices)."""
     from graspgen.collision import build_tree
-    from graspgen.collision._triangles import EXACT_TRIANGLES as _EXACT_TRIANGLES
+    from graspgen.collision._tritree import EXACT_TRIANGLES as _EXACT_TRIANGLES
 
     ring = _parts()["ring"]
     faces = np.vstack([ring.faces, [[0, 0, 1], [2, 2, 2]]])  # two degenerate triangles, dropped by the tree
