@@ -93,9 +93,10 @@ def _is_kind(node: ast.AST) -> bool:
 
 
 def _has_text(node: ast.AST) -> bool:
-    """A string literal, or a tuple / list / set of them."""
+    """A job kind's name as a string literal, or a tuple / list / set holding one (other kinds, a gripper's
+    "parallel" or "suction", are not job kinds)."""
     if isinstance(node, ast.Constant):
-        return isinstance(node.value, str)
+        return isinstance(node.value, str) and node.value in KINDS
     if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
         return any(_has_text(e) for e in node.elts)
     return False

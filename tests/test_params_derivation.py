@@ -16,6 +16,7 @@ from services_conftest import box_stl
 from graspgen.cli import _parser, _run_params, main
 from graspgen.errors import InvalidParameterError
 from graspgen.examples import EXAMPLE_GRIPPER
+from graspgen.gripper import GripperSpec
 from graspgen.params import Params, QualityOptions, _option, from_job
 from graspgen.parts import load_part
 from services.api.contract_schemas import JobParams, job_params_model
@@ -99,6 +100,7 @@ def _run_context(tmp_path, params: dict) -> RunContext:
         recording=None,
         progress=lambda stage, fraction: None,
         load_part=lambda path: load_part(str(path), units="mm", name="box"),
+        gripper=lambda: GripperSpec.from_dict(EXAMPLE_GRIPPER),
     )
 
 

@@ -14,7 +14,7 @@ ROOT = Path(__file__).resolve().parents[2]
 #: the CLI of whatever `graspgen` package is first on the path
 CLI = [sys.executable, "-c", "import sys; from graspgen.cli import main; sys.exit(main())"]
 #: modules whose kernels a generate job, a re-cluster or a preview runs
-MODULES = ("antipodal", "collision", "clustering", "sampling", "quality", "coverage", "render", "parts")
+MODULES = ("antipodal", "_points", "_triangles", "clustering", "sampling", "quality", "coverage", "render", "parts")
 
 pytestmark = pytest.mark.slow  # compiles every kernel from scratch (a minute or two)
 

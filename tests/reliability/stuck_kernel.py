@@ -1,4 +1,5 @@
-"""Preloaded into one test's worker process only (tests/reliability/worker_stack.py, `shim=True`).
+"""Installed into one test's worker process only (tests/reliability/worker_stack.py, `shim=True`, calls install()):
+importing it changes nothing, so a test may import STUCK_SEED.
 
 A job whose seed is STUCK_SEED behaves like a native kernel that never returns to the interpreter: the soft time
 limit's signal (SIGUSR1) stays pending and no progress callback runs, so nothing but the hard time limit (the pool
@@ -18,7 +19,8 @@ _generate = graspgen.generate
 
 
 def generate(*args, **kwargs):  # type: ignore[no-untyped-def]
-    if kwargs.get("seed") == STUCK_SEED:
+    params = kwargs.get("params")
+    if kwargs.get("seed") == STUCK_SEED or getattr(params, "seed", None) == STUCK_SEED:
         # the Python-level handler of the soft limit never gets to run, as in a kernel that does not return
         signal.signal(signal.SIGUSR1, signal.SIG_IGN)
         while True:
@@ -26,4 +28,6 @@ def generate(*args, **kwargs):  # type: ignore[no-untyped-def]
     return _generate(*args, **kwargs)
 
 
-graspgen.generate = generate
+def install() -> None:
+    """Every later graspgen.generate call goes through `generate` above."""
+    graspgen.generate = generate

@@ -145,7 +145,7 @@ class Stack:
         stuck_kernel.py; `own_group` puts it in a process group of its own, so the test can kill all of it."""
         n = len(self.workers) + 1
         boot = (
-            f"import sys; sys.path.insert(0, {str(HERE)!r}); import stuck_kernel; "
+            f"import sys; sys.path.insert(0, {str(HERE)!r}); import stuck_kernel; stuck_kernel.install(); "
             "from services.cli import main; sys.exit(main(sys.argv[1:]))"
         )
         env = settings_env(**{**self.values, **overrides})
