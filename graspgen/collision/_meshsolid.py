@@ -11,7 +11,7 @@ is a separating-axis test over every face normal and edge pair of the two (`pris
 as meeting, within the guard band.
 
 For the point kernel, which only tests whether a sampled point lies in a box, a mesh solid offers its inner box
-(`inner_box`): a box that lies wholly inside the solid, so that a point in it is certainly in the solid (a prefilter
+(`inner_boxes`): a box that lies wholly inside the solid, so that a point in it is certainly in the solid (a prefilter
 that can only block what the exact test blocks too).
 """
 
@@ -27,18 +27,18 @@ from numba import njit
 from ._shapes import Cuboid
 from ._tritree import COUNT, LEFT, M_C, M_H, RIGHT, START, MeshTree, TriangleTree, build_tree, empty_tree, tri_box
 
-__all__ = ["MeshSolid", "MeshSet", "mesh_solid", "inner_box"]
+__all__ = ["MeshSolid", "MeshSet", "mesh_solid", "inner_boxes"]
 
 
 @dataclass(frozen=True, eq=False)
 class MeshSolid:
     """A closed triangle mesh in its own frame, metres: its triangle tree, the vertices of its convex hull (the
-    lowest point along any direction is one of them), its bounding box and a box inside it (None: none found)."""
+    lowest point along any direction is one of them), its bounding box and a few boxes inside it (inner_boxes)."""
 
     tree: MeshTree
     hull_vertices: np.ndarray  # (h, 3)
     bounds: Cuboid
-    inner: Cuboid | None
+    inner: tuple[Cuboid, ...]
 
     def record(self) -> TriangleTree:
         return self.tree.record()
@@ -78,7 +78,7 @@ def mesh_solid(vertices: np.ndarray, faces: np.ndarray) -> MeshSolid:
     tree = build_tree(V, F)
     hull = V[ConvexHull(V).vertices] if len(V) >= 4 else V
     lo, hi = V.min(axis=0), V.max(axis=0)
-    solid = MeshSolid(tree, np.ascontiguousarray(hull), Cuboid(tuple(lo), tuple(hi)), inner_box(tree, V))
+    solid = MeshSolid(tree, np.ascontiguousarray(hull), Cuboid(tuple(lo), tuple(hi)), inner_boxes(tree, V))
     with _CACHE_LOCK:
         while len(_CACHE) >= _CACHE_KEEP:
             _CACHE.pop(next(iter(_CACHE)))
@@ -162,24 +162,25 @@ def _grow(tree: TriangleTree, lo: np.ndarray, hi: np.ndarray, limit_lo: np.ndarr
             lo[axis] -= ok
 
 
-def inner_box(tree: MeshTree, vertices: np.ndarray, grid: int = 8, seeds: int = 4) -> Cuboid | None:
-    """A large box wholly inside the closed mesh: from the grid points inside it (winding number) with the most room
-    around them, the largest of the boxes grown from each (a cube first, then face by face, twice). The box is
-    checked at the end: no triangle meets it and its centre is inside, so it lies in the solid. None when the mesh
-    has no room at the grid's resolution."""
+def inner_boxes(tree: MeshTree, vertices: np.ndarray, grid: int = 10, most: int = 3) -> tuple[Cuboid, ...]:
+    """Up to `most` large boxes wholly inside the closed mesh, together covering most of it: greedily, each grown
+    (a cube first, then face by face, twice) from the grid point inside the mesh (winding number) with the most room
+    around it among those no earlier box covers; a box is kept while it covers at least a tenth of the inside grid
+    points that the earlier ones leave out. Each box is checked at the end: no triangle meets it and its centre is
+    inside, so it lies in the solid. Empty when the mesh has no room at the grid's resolution."""
     rec = tree.record()
     if len(tree) == 0:
-        return None
+        return ()
     lo, hi = vertices.min(axis=0), vertices.max(axis=0)
     span = hi - lo
     axes = [lo[a] + span[a] * (np.arange(grid) + 0.5) / grid for a in range(3)]
     pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    inside = [p for p in pts if _winding(rec.triangles, p) > 0.5]
-    if not inside:
-        return None
+    inside = np.array([p for p in pts if _winding(rec.triangles, p) > 0.5]).reshape(-1, 3)
+    if not len(inside):
+        return ()
     # room around each inside point: the largest clear cube (bisection)
-    room = []
-    for p in inside:
+    room = np.zeros(len(inside))
+    for n, p in enumerate(inside):
         ok, bad = 0.0, float(span.max())
         for _ in range(16):
             mid = 0.5 * (ok + bad)
@@ -187,21 +188,26 @@ def inner_box(tree: MeshTree, vertices: np.ndarray, grid: int = 8, seeds: int = 
                 bad = mid
             else:
                 ok = mid
-        room.append(ok)
-    best, best_vol = None, 0.0
-    for k in np.argsort(room)[::-1][:seeds]:
-        if room[k] <= 0.0:
-            continue
+        room[n] = ok
+    boxes: list[Cuboid] = []
+    covered = np.zeros(len(inside), dtype=bool)
+    while len(boxes) < most:
+        left = np.flatnonzero(~covered & (room > 0.0))
+        if not len(left):
+            break
+        k = left[np.argmax(room[left])]
         b_lo, b_hi = inside[k] - room[k], inside[k] + room[k]
         for _ in range(2):
             _grow(rec, b_lo, b_hi, lo, hi)
-        vol = float(np.prod(b_hi - b_lo))
-        if vol > best_vol:
-            best, best_vol = (b_lo.copy(), b_hi.copy()), vol
-    if best is None:
-        return None
-    b_lo, b_hi = best
-    centre = 0.5 * (b_lo + b_hi)
-    if _box_meets_tree(rec, centre, 0.5 * (b_hi - b_lo)) or _winding(rec.triangles, centre) <= 0.5:
-        return None
-    return Cuboid(tuple(float(v) for v in b_lo), tuple(float(v) for v in b_hi))
+        centre = 0.5 * (b_lo + b_hi)
+        if _box_meets_tree(rec, centre, 0.5 * (b_hi - b_lo)) or _winding(rec.triangles, centre) <= 0.5:
+            room[k] = 0.0  # a box that fails its check is not grown from here again
+            continue
+        now = np.all((inside >= b_lo) & (inside <= b_hi), axis=1)
+        gain = int(np.count_nonzero(now & ~covered))
+        if boxes and gain < 0.1 * int(np.count_nonzero(~covered)):
+            break
+        covered |= now
+        covered[k] = True
+        boxes.append(Cuboid(tuple(float(v) for v in b_lo), tuple(float(v) for v in b_hi)))
+    return tuple(boxes)

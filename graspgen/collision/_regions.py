@@ -32,7 +32,7 @@ from ._meshsolid import MeshSet
 from ._solids import BoxGripper, GripperSolids
 from ._tritree import empty_tree
 
-__all__ = ["Region", "CollisionModel", "collision_model", "approach_reach", "Regions", "region_table", "FINGER_ROWS"]
+__all__ = ["Region", "CollisionModel", "collision_model", "approach_reach", "Regions", "region_table"]
 
 # The columns of a region row (region_table): MOVES (-1, +1: the finger it moves with; 0: fixed); X0, X1 (the
 # bounds along X: in the finger's frame for a moving region, in the grasp frame for a fixed one); YC, HY (centre and
@@ -46,13 +46,11 @@ __all__ = ["Region", "CollisionModel", "collision_model", "approach_reach", "Reg
 MOVES, X0, X1, YC, HY, ZLO, ZHI, RMIN, RMAX, RIN, RMIN2, RMAX2, RIN2, SYM, SOLID = range(15)
 COLUMNS = 15
 
-#: rows 0 and 1 of a region table are the -X and the +X finger, one box each (a compile-time constant of the
-#: kernels: their loops over the fingers unroll); the fixed regions follow
-FINGER_ROWS = 2
-
-#: The region table as the kernels read it: rows (r, COLUMNS) float64, the -X finger, the +X finger, then the fixed
-#: regions; travel = (finger thickness, stroke, min_width, clearance, inner margin), metres (finger_x_ranges).
-Regions = namedtuple("Regions", ["rows", "travel"])
+#: The region table as the kernels read it: rows (r, COLUMNS) float64, the fingers' rows first, then the fixed
+#: regions; fingers: how many rows move with the fingers (2 for box fingers, one per finger; more for the boxes
+#: inside CAD fingers); travel = (finger thickness, stroke, min_width, clearance, inner margin), metres
+#: (finger_x_ranges).
+Regions = namedtuple("Regions", ["rows", "fingers", "travel"])
 
 
 @dataclass(frozen=True)
@@ -127,19 +125,19 @@ def collision_model(
         return CollisionModel(regions=tuple(regions), **common)
     left, right, body = meshes.left, meshes.right, meshes.body
     regions = [Region(-1, left.bounds.lo, left.bounds.hi, 0), Region(1, right.bounds.lo, right.bounds.hi, 1), *fixed]
-    prefilter = [_inner_region(-1, left), _inner_region(1, right), *fixed]
+    prefilter = [*_inner_regions(-1, left), *_inner_regions(1, right), *fixed]
     if body is not None and mode == "swept":
         regions.append(Region(0, body.bounds.lo, body.bounds.hi, 2))
-        if body.inner is not None:
-            prefilter.append(Region(0, body.inner.lo, body.inner.hi))
+        prefilter += [Region(0, b.lo, b.hi) for b in body.inner]
     return CollisionModel(regions=tuple(regions), meshes=meshes, prefilter=tuple(prefilter), **common)
 
 
-def _inner_region(moves: int, solid) -> Region:
-    """The point kernel's region for a mesh finger: its inner box, or a box that holds nothing (x from 1 km on)."""
-    if solid.inner is not None:
-        return Region(moves, solid.inner.lo, solid.inner.hi)
-    return Region(moves, (1.0e3, 0.0, 0.0), (1.0e3, 0.0, 0.0))
+def _inner_regions(moves: int, solid) -> list[Region]:
+    """The point kernel's regions for a mesh finger: the boxes inside it, or one box that holds nothing (x from 1 km
+    on) when it has none."""
+    if solid.inner:
+        return [Region(moves, b.lo, b.hi) for b in solid.inner]
+    return [Region(moves, (1.0e3, 0.0, 0.0), (1.0e3, 0.0, 0.0))]
 
 
 def approach_reach(points: np.ndarray) -> float:
@@ -156,8 +154,9 @@ def region_table(model: CollisionModel, guard: float = TOLERANCES.guard, *, pref
     lo_g, hi_g = 1.0 - guard, 1.0 + guard
     rows = []
     regions = model.prefilter if prefilter and model.prefilter is not None else model.regions
-    if [r.moves for r in regions if r.moves != 0] != [-1, 1]:
-        raise ValueError("a collision model has one region for each finger, the -X finger's first")
+    moving = [r.moves for r in regions if r.moves != 0]
+    if sorted(set(moving)) != [-1, 1] or any(r.moves != 0 for r in regions[len(moving) :]):
+        raise ValueError("a collision model has regions for both fingers, before the fixed ones")
     for reg in sorted(regions, key=lambda r: r.moves == 0):
         ylo, yhi = reg.lo[1], reg.hi[1]
         yc, hy = (ylo + yhi) / 2, (yhi - ylo) / 2
@@ -180,7 +179,7 @@ def region_table(model: CollisionModel, guard: float = TOLERANCES.guard, *, pref
         rows.append(row + [r_min * r_min * lo_g, r_max * r_max * hi_g, r_in2, sym, float(reg.solid)])
     travel = np.array([model.finger_thickness, model.stroke, model.min_width, model.clearance, model.inner_margin])
     table = np.array(rows, dtype=np.float64).reshape(-1, COLUMNS)
-    return Regions(table, travel)
+    return Regions(table, len(moving), travel)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -202,7 +201,7 @@ def finger_x_ranges(xr, inside, w, regions):
     else:
         o = max(w - clearance, min_width + 2 * t)
         a, b = min(o, w) / 2, w / 2 - margin
-    for r in range(FINGER_ROWS):
+    for r in range(regions.fingers):
         if not inside:
             lo, hi = a + rows[r, X0], b + rows[r, X1]
         else:
@@ -235,5 +234,5 @@ def finger_travel(inside, w, regions):
 @njit(cache=True, inline="always", error_model="numpy")
 def fixed_x_ranges(xr, regions):
     """The fixed regions' bounds along X into xr[r, 0:2] for the rows after the fingers'."""
-    for r in range(FINGER_ROWS, regions.rows.shape[0]):
+    for r in range(regions.fingers, regions.rows.shape[0]):
         xr[r, 0], xr[r, 1] = regions.rows[r, X0], regions.rows[r, X1]

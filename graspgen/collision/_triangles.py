@@ -28,7 +28,6 @@ from ._frame import (
     roll_table,
 )
 from ._regions import (
-    FINGER_ROWS,
     HY,
     MOVES,
     RMAX,
@@ -166,9 +165,10 @@ def _vertex_x_range(verts, q0, q1, F):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _meets_finger_slab(masks, top, blocked, rx, x_lo, x_hi):
-    """Does [x_lo, x_hi] meet the slab of a finger region that still has rolls to test at stack entry `top`?"""
-    for r in range(FINGER_ROWS):  # noqa: SIM110 (numba compiles no generator passed to any())
+def _meets_finger_slab(masks, top, blocked, rx, fingers, x_lo, x_hi):
+    """Does [x_lo, x_hi] meet the slab of a finger region (the first `fingers` rows) that still has rolls to test
+    at stack entry `top`?"""
+    for r in range(fingers):  # noqa: SIM110 (numba compiles no generator passed to any())
         if masks[top, r] & ~blocked and rx[r, 0] <= x_hi and x_lo <= rx[r, 1]:
             return True
     return False
@@ -226,7 +226,7 @@ def _walk(todo, tree, regions, rolls, solids, g, work):
         x_lo = max(x - xh, ox - oh) - g
         x_hi = min(x + xh, ox + oh) + g
         inner = children[k, LEFT] >= 0
-        if vstart[k + 1] > vstart[k] and _meets_finger_slab(masks, top, blocked, rx, x_lo, x_hi):
+        if vstart[k + 1] > vstart[k] and _meets_finger_slab(masks, top, blocked, rx, regions.fingers, x_lo, x_hi):
             # a small node whose boxes meet a finger's slab: the range of its own vertices instead. The boxes of a
             # curved patch stick out past a contact's margin where its triangles do not; the triangle loop below
             # skips a region by the same numbers, so this only prunes what it would skip. Above the leaves only
@@ -240,7 +240,7 @@ def _walk(todo, tree, regions, rolls, solids, g, work):
                 e_lo, e_hi = _vertex_x_range(verts, vstart[k], vstart[k + 1], F)
                 x_lo, x_hi = max(x_lo, e_lo - g), min(x_hi, e_hi + g)
                 tally[cls, 0] += 1
-                if not _meets_finger_slab(masks, top, blocked, rx, x_lo, x_hi):
+                if not _meets_finger_slab(masks, top, blocked, rx, regions.fingers, x_lo, x_hi):
                     tally[cls, 1] += 1
         any_hit = np.uint64(0)
         have_ob = False
@@ -255,7 +255,7 @@ def _walk(todo, tree, regions, rolls, solids, g, work):
                 continue
             if rc + rad < rows[r, RMIN] or rc - rad > rows[r, RMAX]:
                 continue
-            if r < FINGER_ROWS and inner:
+            if r < regions.fingers and inner:
                 # the fingers' boxes are small: their per-roll tests prune little above the leaves
                 hit[r] = live
                 any_hit |= live
