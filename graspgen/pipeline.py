@@ -20,7 +20,7 @@ from .coverage import coverage
 from .errors import InvalidMeshError, InvalidParameterError, InvalidUnitsError
 from .export import Candidates, GraspSet
 from .gripper import GripperSpec
-from .params import Params, QualityOptions, from_keywords, keyword_parameters
+from .params import TOLERANCES, Params, QualityOptions, from_keywords, keyword_parameters
 from .parts import Part, load_part
 from .transforms import grasp_frames, roll_angles_rad
 
@@ -668,6 +668,8 @@ def _cluster_and_export(cands, obj, spec, params, mu, stats, report, t_all, warn
         terms, key = terms[order], key[order]
     cands = replace(cands, labels=labels, medoids=medoids)
     grasps = _grasps(cands, medoids, clusters, sizes)
+    if spec.geometry is not None and extras.part is not None and extras.part.mesh is not None:
+        stats["seat"] = _seat_grasps(grasps, spec, extras.part, mu, params)
     for r, g in enumerate(grasps):
         m = int(medoids[r])
         if terms is not None:
@@ -751,6 +753,40 @@ def _grasps(cands: Candidates, medoids, clusters, sizes) -> list[dict[str, Any]]
             }
         )
     return out
+
+
+def _seat_grasps(grasps: list[dict[str, Any]], spec: GripperSpec, part: Part, mu: float, params: Params) -> dict:
+    """Fingers from CAD close until they touch (CONTRACT.md): each exported grasp's `width`, `contacts`, `normals`
+    and `friction_margin_deg` become the seat's (graspgen.collision.seat_fingers, from the contact end of the fingers'
+    travel that criterion (d) cleared): `contacts` holds, per finger, its contact nearest the finger's closing line,
+    `finger_contacts` and `finger_normals` all of them (a V-groove's two flanks); the pose stays the candidate's (the
+    gripper's body was checked there). Returns the counts for stats."""
+    tree = _collision.build_tree(part.mesh.vertices, part.mesh.faces)
+    solids = spec.solids()
+    half = quality.half_angle_deg(mu, params.safety_factor)
+    margin = TOLERANCES.inner_margin
+    unseated = 0
+    for g in grasps:
+        T = np.asarray(g["pose"], dtype=np.float64)
+        seat = _collision.seat_fingers(tree, solids, T, float(g["width"]), margin)
+        if seat is None:
+            unseated += 1
+            continue
+        x, o = T[:3, 0], T[:3, 3]
+        contacts, normals = [], []
+        for k in range(2):
+            pts = seat.points[k]
+            off = (pts - o) - np.outer((pts - o) @ x, x)  # distance from the closing line through the origin
+            q = int(np.argmin(np.einsum("ij,ij->i", off, off)))
+            contacts.append(pts[q].tolist())
+            normals.append(seat.normals[k][q].tolist())
+        g["width"] = float(seat.width)
+        g["contacts"] = contacts
+        g["normals"] = normals
+        g["friction_margin_deg"] = _collision.seat_friction_margin_deg(seat, x, half)
+        g["finger_contacts"] = [seat.points[k].tolist() for k in range(2)]
+        g["finger_normals"] = [seat.normals[k].tolist() for k in range(2)]
+    return {"grasps": len(grasps) - unseated, "unseated": unseated}
 
 
 def _empty_reason(rejected, total, spec: GripperSpec, params: Params, mu: float, pts, nrm, hold_diag=None) -> dict:

@@ -9,6 +9,7 @@ against the part's sampled points and against its triangles.
 - `_hull`: the sample's convex hull, a certificate that the palm is clear at a roll.
 - `_tritree`: the part's triangle tree, the exact triangle tests, normals near a point.
 - `_triangles`: the mesh-exact check (mesh_free_rolls).
+- `_seat`: where a CAD finger first touches the part as it closes (the export's contacts).
 - `_frame`, `_bits`: the candidate's roll-0 frame and roll tables, roll masks.
 
 Design notes (why the walks are built as they are, why their bounds are exact): docs/design/collision.md.
@@ -18,6 +19,7 @@ from ._bits import MAX_ROLLS, any_free, popcount
 from ._meshsolid import MeshSet, MeshSolid, mesh_solid
 from ._points import STATS, free_rolls, free_rolls_of_pairs, free_rolls_stats
 from ._regions import CollisionModel, Region, approach_reach, collision_model
+from ._seat import Seat, seat_fingers, seat_friction_margin_deg
 from ._shapes import Box, Cuboid
 from ._solids import GripperSolids
 from ._triangles import mesh_free_rolls, mesh_free_rolls_of_pairs
@@ -34,6 +36,7 @@ __all__ = [
     "MeshSolid",
     "MeshTree",
     "Region",
+    "Seat",
     "any_free",
     "approach_reach",
     "build_tree",
@@ -46,4 +49,6 @@ __all__ = [
     "mesh_solid",
     "normal_spread_rad",
     "popcount",
+    "seat_fingers",
+    "seat_friction_margin_deg",
 ]

@@ -224,3 +224,52 @@ def test_every_free_roll_is_clear_in_an_independent_oracle(gripper):
                         assert not m.contains(local).any(), (name, q, k, s)
                 checked += 1
     assert checked > 20
+
+
+def test_a_v_groove_seats_a_round_part_on_both_flanks():
+    """A cylinder of 8 mm radius held across its diameter by the 90 degree V-groove: each finger closes past the
+    sampled contact until both flanks touch (the rigid fit: the groove's mouth planes 6.63 mm apart), the contacts lie
+    on the cylinder at 45 degrees from the closing axis, and a flat finger touches at the sampled contact itself."""
+    from graspgen.collision import seat_fingers, seat_friction_margin_deg
+
+    cyl = trimesh.creation.cylinder(radius=0.008, height=0.08, sections=96)
+    tree = build_tree(cyl.vertices, cyl.faces)
+    vgroove = GripperSpec.load(EXAMPLES / "pgn-80-vgroove.json")
+    seat = seat_fingers(tree, vgroove.solids(), np.eye(4), 0.016, 1e-3)
+    # the groove's apex sits 8 sqrt(2) = 11.31 mm from the axis; the mouth planes of the example lie 3.31 mm
+    # nearer (6.63 mm apart)
+    assert seat.width == pytest.approx(0.00663, abs=2e-4)
+    for k, side in ((0, -1.0), (1, 1.0)):
+        pts, nrm = seat.points[k], seat.normals[k]
+        radius = np.hypot(pts[:, 0], pts[:, 1])
+        assert np.allclose(radius, 0.008, atol=2e-4)  # on the cylinder (its facets)
+        assert {np.sign(p[1]) for p in pts} == {-1.0, 1.0}  # both flanks
+        assert np.allclose(np.abs(nrm[:, 0]), np.sqrt(0.5), atol=0.02) and np.all(np.sign(nrm[:, 0]) == side)
+    half = np.degrees(np.arctan(0.5)) / 1.5
+    # the flanks carry the push along the axis between their friction cones: the full half-angle is left
+    assert seat_friction_margin_deg(seat, np.array([1.0, 0.0, 0.0]), half) == pytest.approx(half, abs=0.5)
+    housing = GripperSpec.load(EXAMPLES / "pgn-80-housing.json")  # flat box fingers
+    flat = seat_fingers(tree, housing.solids(), np.eye(4), 0.016, 1e-3)
+    assert flat.width == pytest.approx(0.016, abs=1e-4)
+    assert all(np.allclose(np.abs(p[:, 0]), 0.008, atol=1e-4) for p in flat.points)
+
+
+def test_generate_with_a_cad_gripper_exports_the_seated_contacts():
+    """End to end: every exported grasp of the V-groove gripper carries its seat: contacts on the part's surface,
+    every finger's contacts listed, the width no more than the inner margin (1 mm) off the sampled pair's on either
+    side (a finger touches part of the surface that stands proud of the sampled contact within the margin first)."""
+    import graspgen
+
+    cyl = trimesh.creation.cylinder(radius=0.008, height=0.05, sections=64)
+    spec = GripperSpec.load(EXAMPLES / "pgn-80-vgroove.json")
+    gs = graspgen.generate(cyl, spec, units="m", points=1500, k1=4, k2=2, mass_kg=0.05)
+    export = gs.to_json()
+    assert export["grasps"] and export["stats"]["seat"]["grasps"] == len(export["grasps"])
+    for g in export["grasps"]:
+        cand = gs.candidates
+        assert g["width"] <= float(cand.widths[g["candidate"]]) + 2e-3
+        for k in range(2):
+            assert g["finger_contacts"][k]
+            for p in [g["contacts"][k], *g["finger_contacts"][k]]:
+                _, dist, _ = trimesh.proximity.closest_point(cyl, np.array([p]))
+                assert dist[0] < 1e-6
