@@ -311,7 +311,7 @@ def _uncovered(a, b, lo, hi, order, n):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _sweep_hits(grid, points, distance, tol, first):
     """For each point q (n, 3): does the segment q + u Z, u in [0, distance], meet the closed mesh eroded by `tol`
     (<= grid.grow)? (n,) bool; with `first`, the points after the first hit are left False."""

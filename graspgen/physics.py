@@ -36,6 +36,15 @@ of the inertia come from the mesh volume (trimesh's mass properties), scaled to 
 a density; the grip force is the gripper's (`GripperSpec.grip_force`) or given. Neither has a default: a validation
 with a guessed mass or force tells nothing about the real pick.
 
+The gripper: box fingers and a box palm from the spec's box fields; for a spec with `geometry` (CONTRACT.md "Gripper
+geometry from CAD") its meshes (`SimGripper`). Each finger body is the finger frame and carries the convex pieces of
+its mesh (each closed shell of the mesh on its own: a convex shell is one piece, any other is decomposed by CoACD as
+the part is), the -X finger's turned 180 degrees about Z; the body's pieces are static geoms of the grasp frame that
+take the palm's role (the approach, a piece of the part reaching into them at the grasp). The approach starts below
+the gripper's highest point and confirms a collision against the exact meshes (meshsweep.SweptMesh: each surface
+sample against the open fingers and the body moved along +Z into place, eroded by `approach_tolerance`). Friction,
+torsion and the joints are the box gripper's.
+
 A `Perturbation` (mass scale, friction, gravity direction after the pick, shake amplitude and directions) changes one
 simulation; `perturbation_set(seed)` is the standard set the quality benchmark checks every exported grasp against.
 """

@@ -230,7 +230,8 @@ def test_inside_grasps_are_refused_for_a_cad_gripper():
 def test_box_meshes_simulate_as_the_box_spec():
     """The contract's boxes given as meshes (finger and palm) give the box spec's outcome on the ring screw: five
     candidates at four rolls each (some collide on the way in: the path test then reads the exact meshes), at 0.2 kg
-    (held) and 1.5 kg (turned out of the pads); slip within 0.1 mm and rotation within 1 degree."""
+    (held) and 1.5 kg (turned out of the pads); slip within 0.05 mm and rotation within 0.1 degree (measured: equal to
+    within 1e-5)."""
     part = example_part("ring-screw")
     gs = graspgen.generate(part, EXAMPLE_GRIPPER, points=1500, k1=4, k2=2, mass_kg=0.2)
     c = gs.candidates
@@ -247,8 +248,8 @@ def test_box_meshes_simulate_as_the_box_spec():
         b = physics.simulate_grasps(meshes, poses, widths, workers=2)
         for ra, rb in zip(a, b, strict=True):
             assert (ra.success, ra.reason) == (rb.success, rb.reason), (ra, rb)
-            assert rb.slip_mm == pytest.approx(ra.slip_mm, abs=0.1)
-            assert rb.rotation_deg == pytest.approx(ra.rotation_deg, abs=1.0)
+            assert rb.slip_mm == pytest.approx(ra.slip_mm, abs=0.05)
+            assert rb.rotation_deg == pytest.approx(ra.rotation_deg, abs=0.1)
             reasons.add(ra.reason)
     assert reasons == {None, "collision", "slipped"}
 
