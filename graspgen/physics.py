@@ -561,6 +561,8 @@ class SimGripper:
         }
 
 
+#: a gripper mesh of more closed shells than this is decomposed as a whole (_solid_pieces)
+_MAX_SHELLS = 32
 #: SimGripper per geometry (its files' digests) and decomposition setting
 _GRIPPERS: OrderedDict = OrderedDict()
 _GRIPPERS_KEPT = 4
@@ -609,9 +611,14 @@ def _sim_gripper(spec: GripperSpec, c: SimConstants) -> SimGripper | None:
 def _solid_pieces(mesh: trimesh.Trimesh, c: SimConstants, what: str, notes: list[str]) -> list[trimesh.Trimesh]:
     """Convex pieces of a closed gripper mesh: each closed shell on its own (shells of a CAD export that touch, e.g.
     a stepped finger's tip and root, are convex more often than their union), convex ones as they are, the others
-    decomposed by CoACD (seed 0: the gripper's pieces do not depend on the run's seed)."""
+    decomposed by CoACD (seed 0: the gripper's pieces do not depend on the run's seed). An inward shell bounds a
+    cavity, which nothing can reach: the outer shell's pieces fill it. The whole mesh is decomposed at once when its
+    shells are not all closed or more than _MAX_SHELLS face outwards (an assembly of many small parts: one
+    decomposition rather than a geom or more per screw)."""
     shells = mesh.split(only_watertight=True)
-    if sum(len(s.faces) for s in shells) != len(mesh.faces):
+    closed = sum(len(s.faces) for s in shells) == len(mesh.faces)
+    shells = [s for s in shells if s.volume > 0]
+    if not closed or not shells or len(shells) > _MAX_SHELLS:
         shells = [mesh]
     pieces: list[trimesh.Trimesh] = []
     for shell in shells:

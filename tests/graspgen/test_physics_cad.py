@@ -216,6 +216,23 @@ def test_a_finger_that_is_not_convex_is_decomposed_and_the_left_finger_is_its_ow
     assert sim.gripper.top_z == pytest.approx(0.015)
 
 
+def test_a_finger_with_a_cavity_is_simulated_as_its_outer_shell():
+    """A closed cavity (an inward shell) inside a box finger cannot be reached: the finger is one piece, the box; the
+    exact mesh of the approach test keeps the cavity."""
+    outer = box((0, -10, -15), (10, 10, 15))
+    cavity_vertices, cavity_faces = box((3, -5, -5), (7, 5, 5))
+    cavity = (cavity_vertices, cavity_faces[:, ::-1])  # facing inwards
+    data = {k: v for k, v in EXAMPLE_GRIPPER.items() if k not in _BOX_FIELDS}
+    data["geometry"] = {"units": "mm", "finger": "f.stl"}
+    spec = GripperSpec.from_dict(data, files={"f.stl": stl_bytes(union_of_shells(outer, cavity))})
+    assert spec.geometry.finger.volume == pytest.approx(5.6e-6)
+    sim = physics.prepare_part(trimesh.creation.box(extents=(0.02, 0.02, 0.02)), spec, mass_kg=0.1)
+    (piece,) = sim.gripper.fingers[1]
+    assert piece.volume == pytest.approx(6e-6) and sim.note is None
+    assert not sim.gripper.swept[1].contains(np.array([[0.005, 0.0, 0.0]]))[0]  # in the cavity
+    assert sim.gripper.swept[1].contains(np.array([[0.001, 0.0, 0.0]]))[0]  # in the wall
+
+
 def test_inside_grasps_are_refused_for_a_cad_gripper():
     sim = physics.prepare_part(trimesh.creation.box(extents=(0.02,) * 3), BOXES_AS_MESHES, mass_kg=0.1)
     with pytest.raises(graspgen.InvalidParameterError, match="inside"):
