@@ -1,14 +1,15 @@
 """Benchmark of criterion (e) `hold` and of the perturbed physics validation (issue 14): does an exported grasp hold?
 
     .venv/bin/python bench/bench_hold.py [--points 5000] [--k1 8] [--k2 2] [--mass 0.2] [--grip-force 20]
-                                         [--sample 200] [--workers 2] [--parts NAME ...]
+                                         [--gripper SPEC.json] [--sample 200] [--workers 2] [--parts NAME ...]
                                          [--configs paper hold validate] [--out docs/benchmarks_quality.md]
 
 Parts: every mesh in ../shared/meshes (*.stl, *.obj; units from its units.json; bad/ left out) and
 ../shared/meshes/paper (units from its units.json); a missing folder is skipped with a message. Gripper: the PGN-80 of
 examples/pgn-80.json (80 mm stroke) with `grip_force` 20 N per finger; a part whose oriented bounding box is wider
 than 70 mm in every direction (the 80 mm stroke minus a 10 mm opening margin) gets the same gripper with a 140 mm
-stroke (`pgn-80-wide`), and the table says so. Every part weighs `--mass` (0.2 kg).
+stroke (`pgn-80-wide`), and the table says so. `--gripper SPEC.json` takes that spec for every part instead (a
+gripper from CAD is simulated with its meshes). Every part weighs `--mass` (0.2 kg).
 
 Three configurations of graspgen.generate at `--points`, k = k1 x k2, seed 0:
 
@@ -123,7 +124,7 @@ def hold_margins_of(part, gs, idx: np.ndarray, spec: GripperSpec, args) -> np.nd
     except ImportError:
         return None
     sample = sampling.sample_surface(part, args.points, seed=0)
-    pad_radius = min(spec.finger_width, spec.finger_depth) / 2
+    pad_radius = min(spec.solids().pad) / 2  # the box finger's face, or a CAD finger's pad
     rho = hold.torsion_radii(sample.points, sample.normals, pad_radius)
     from scipy.spatial import cKDTree
 
@@ -159,9 +160,13 @@ def judge(sim, c, idx: np.ndarray, members, workers: int) -> list[list]:
 
 
 def run_part(label: str, part, args, members) -> dict:
-    gripper = gripper_for(part.mesh, args.grip_force)
-    spec = GripperSpec.from_dict(gripper)
-    row = {"part": label, "gripper": gripper["name"], "configs": {}}
+    if args.gripper:  # a spec file (a CAD gripper's meshes beside it), with --grip-force
+        spec = dataclasses.replace(GripperSpec.load(args.gripper), grip_force=args.grip_force)
+        gripper: dict | GripperSpec = spec
+    else:
+        gripper = gripper_for(part.mesh, args.grip_force)
+        spec = GripperSpec.from_dict(gripper)
+    row = {"part": label, "gripper": spec.name, "configs": {}}
     t0 = time.perf_counter()
     # the judge's simulation; --noslip changes only its friction model (the pipeline's own validation keeps the default)
     sim = physics.prepare_part(
@@ -302,8 +307,13 @@ def markdown(rows, members, args, wall_s) -> str:
         "",
         f"Made by `{cmd}` ({wall_s / 60:.0f} min; see its docstring). {args.points} points, k = {args.k1} x "
         f"{args.k2}, seed 0, every part {args.mass} kg, grip force {args.grip_force:g} N per finger, friction 0.5, "
-        "gripper pgn-80 (80 mm stroke; `pgn-80-wide`, 140 mm, where the part is wider than 70 mm in every "
-        "direction). Configurations: `paper` = criteria (a)-(d) (hold off); `hold` = with (e); `validate` = with "
+        + (
+            f"gripper {args.gripper}. "
+            if getattr(args, "gripper", None)
+            else "gripper pgn-80 (80 mm stroke; `pgn-80-wide`, 140 mm, where the part is wider than 70 mm in every "
+            "direction). "
+        )
+        + "Configurations: `paper` = criteria (a)-(d) (hold off); `hold` = with (e); `validate` = with "
         "(e) and MuJoCo validation + repair. Every exported grasp is simulated nominally and under the "
         f"{len(members)} members of `physics.perturbation_set(0)`: nominal = held in the nominal simulation; all = "
         "held under every member; mean = mean share of members held; cov = stats.coverage at 1 cm / 30 deg. "
@@ -502,6 +512,11 @@ def main() -> None:
     ap.add_argument("--k2", type=int, default=2)
     ap.add_argument("--mass", type=float, default=0.2)
     ap.add_argument("--grip-force", type=float, default=20.0)
+    ap.add_argument(
+        "--gripper",
+        help="a gripper spec file for every part instead of pgn-80 (e.g. examples/pgn-80-vgroove.json: a gripper "
+        "from CAD is simulated with its finger and body meshes); its grip force is --grip-force",
+    )
     ap.add_argument(
         "--noslip",
         type=int,

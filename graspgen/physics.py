@@ -36,6 +36,15 @@ of the inertia come from the mesh volume (trimesh's mass properties), scaled to 
 a density; the grip force is the gripper's (`GripperSpec.grip_force`) or given. Neither has a default: a validation
 with a guessed mass or force tells nothing about the real pick.
 
+The gripper: box fingers and a box palm from the spec's box fields; for a spec with `geometry` (CONTRACT.md "Gripper
+geometry from CAD") its meshes (`SimGripper`). Each finger body is the finger frame and carries the convex pieces of
+its mesh (each closed shell of the mesh on its own: a convex shell is one piece, any other is decomposed by CoACD as
+the part is), the -X finger's turned 180 degrees about Z; the body's pieces are static geoms of the grasp frame that
+take the palm's role (the approach, a piece of the part reaching into them at the grasp). The approach starts below
+the gripper's highest point and confirms a collision against the exact meshes (meshsweep.SweptMesh: each surface
+sample against the open fingers and the body moved along +Z into place, eroded by `approach_tolerance`). Friction,
+torsion and the joints are the box gripper's.
+
 A `Perturbation` (mass scale, friction, gravity direction after the pick, shake amplitude and directions) changes one
 simulation; `perturbation_set(seed)` is the standard set the quality benchmark checks every exported grasp against.
 """
@@ -57,6 +66,7 @@ import trimesh
 
 from .errors import InvalidParameterError
 from .gripper import GripperSpec
+from .meshsweep import SweptMesh
 
 __all__ = [
     "SimConstants",
@@ -67,6 +77,7 @@ __all__ = [
     "NOMINAL",
     "perturbation_set",
     "SimPart",
+    "SimGripper",
     "SimResult",
     "prepare_part",
     "simulate_grasp",
@@ -356,6 +367,8 @@ class SimPart:
     #: refinements of the decomposition from the first one (0 for the first)
     refinements: int = 0
     _refined: Any = field(default=None, repr=False, compare=False)
+    #: the fingers' and the body's convex pieces and exact meshes for a gripper from CAD (None: the spec's boxes)
+    gripper: SimGripper | None = field(default=None, repr=False, compare=False)
 
     def refined(self) -> SimPart | None:
         """The same part (mass, inertia, gripper) on a decomposition twice as fine, built once; None when its
@@ -376,6 +389,7 @@ class SimPart:
                     finer,
                     self.seed,
                     surface_points=self.surface_points,
+                    gripper=self.gripper,
                 )
                 part.refinements = self.refinements + 1
                 part._surface_tree = self._surface_tree  # the same samples: no second tree
@@ -406,6 +420,8 @@ class SimPart:
         }
         if self.note:
             out["note"] = self.note
+        if self.gripper is not None:
+            out["gripper"] = self.gripper.describe()
         if self._refined:
             out["refined"] = {
                 "pieces": self._refined.pieces,
@@ -415,8 +431,8 @@ class SimPart:
 
     def model_for(self, p: Perturbation, *, palm: bool = True) -> Any:
         """The MjModel for perturbation `p`: the shared one unless it changes the mass or the friction, or `palm` is
-        False (the palm collides with nothing), each built once per setting, then shared read-only like the nominal
-        one."""
+        False (the palm, or every piece of a CAD gripper's body, collides with nothing), each built once per setting,
+        then shared read-only like the nominal one."""
         mu = self.friction if p.friction is None else float(p.friction)
         soft = bool(p.soft_friction) and self.constants.noslip_iterations > 0
         if p.mass_scale == 1.0 and mu == self.friction and not soft and palm:
@@ -436,6 +452,7 @@ class SimPart:
                     replace(self.constants, noslip_iterations=0) if soft else self.constants,
                     self.grip_force,
                     palm_collides=palm,
+                    gripper=self.gripper,
                 )
                 self._variants[key] = mujoco.MjModel.from_xml_string(xml)
             return self._variants[key]
@@ -515,6 +532,103 @@ def _decompose_once(mesh: trimesh.Trimesh, c: SimConstants, seed: int) -> tuple[
     return pieces, "coacd", None
 
 
+# --------------------------------------------------------------------------------------------------------------------
+# a gripper from CAD
+
+
+@dataclass(frozen=True, eq=False)
+class SimGripper:
+    """A gripper from CAD as the simulation holds it (CONTRACT.md "Gripper geometry from CAD").
+
+    - `fingers`: the convex pieces of the -X and the +X finger, each in its finger body's frame, which is the finger
+      frame (the -X finger's turned 180 degrees about Z into the grasp frame's axes: (x, y, z) -> (-x, -y, z));
+    - `body`: the body's convex pieces in the grasp frame (empty without a body);
+    - `swept`: the exact meshes in the same frames (-X finger, +X finger, body or None), for the approach's check
+      against the part's own surface (eroded by SimConstants.approach_tolerance);
+    - `top_z`: the gripper's highest z (its leading edge along the approach), grasp frame;
+    - `notes`: what was approximated (a mesh simulated as its convex hull)."""
+
+    fingers: tuple[list[trimesh.Trimesh], list[trimesh.Trimesh]]
+    body: list[trimesh.Trimesh]
+    swept: tuple[SweptMesh, SweptMesh, SweptMesh | None]
+    top_z: float
+    notes: tuple[str, ...] = ()
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "finger_pieces": [len(self.fingers[0]), len(self.fingers[1])],
+            "body_pieces": len(self.body),
+        }
+
+
+#: a gripper mesh of more closed shells than this is decomposed as a whole (_solid_pieces)
+_MAX_SHELLS = 32
+#: SimGripper per geometry (its files' digests) and decomposition setting
+_GRIPPERS: OrderedDict = OrderedDict()
+_GRIPPERS_KEPT = 4
+
+
+def _turned(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """`mesh` turned 180 degrees about Z: (x, y, z) -> (-x, -y, z) (a rotation: the winding stays outward)."""
+    return trimesh.Trimesh(np.asarray(mesh.vertices) * [-1.0, -1.0, 1.0], np.asarray(mesh.faces), process=False)
+
+
+def _sim_gripper(spec: GripperSpec, c: SimConstants) -> SimGripper | None:
+    """The SimGripper of `spec`'s CAD geometry (None for the contract's boxes), built once per geometry and setting:
+    the convex pieces of each closed shell of each mesh (a convex shell is one piece, others CoACD under `c`'s
+    settings, as the part) and the exact meshes."""
+    g = spec.geometry
+    if g is None:
+        return None
+    key = (g, c.coacd_threshold, c.coacd_max_hulls, c.coacd_options, c.approach_tolerance)
+    with _DECOMPOSITIONS_LOCK:
+        if key in _GRIPPERS:
+            _GRIPPERS.move_to_end(key)
+            return _GRIPPERS[key]
+    notes: list[str] = []
+    right = _solid_pieces(g.finger, c, "the +X finger", notes)
+    same = "finger_left" not in g.files  # the -X finger is the +X finger's mesh
+    left = [_turned(p) for p in (right if same else _solid_pieces(g.finger_left, c, "the -X finger", notes))]
+    body_mesh = g.body
+    body = _solid_pieces(body_mesh, c, "the body", notes) if body_mesh is not None else []
+    tol = c.approach_tolerance
+    swept = (
+        SweptMesh.of(_turned(g.finger_left).triangles, tol),
+        SweptMesh.of(g.finger.triangles, tol),
+        SweptMesh.of(body_mesh.triangles, tol) if body_mesh is not None else None,
+    )
+    top = max(float(g.finger.bounds[1, 2]), float(g.finger_left.bounds[1, 2]))
+    if body_mesh is not None:
+        top = max(top, float(body_mesh.bounds[1, 2]))
+    out = SimGripper((left, right), body, swept, top, tuple(dict.fromkeys(notes)))
+    with _DECOMPOSITIONS_LOCK:
+        _GRIPPERS[key] = out
+        while len(_GRIPPERS) > _GRIPPERS_KEPT:
+            _GRIPPERS.popitem(last=False)
+    return out
+
+
+def _solid_pieces(mesh: trimesh.Trimesh, c: SimConstants, what: str, notes: list[str]) -> list[trimesh.Trimesh]:
+    """Convex pieces of a closed gripper mesh: each closed shell on its own (shells of a CAD export that touch, e.g.
+    a stepped finger's tip and root, are convex more often than their union), convex ones as they are, the others
+    decomposed by CoACD (seed 0: the gripper's pieces do not depend on the run's seed). An inward shell bounds a
+    cavity, which nothing can reach: the outer shell's pieces fill it. The whole mesh is decomposed at once when its
+    shells are not all closed or more than _MAX_SHELLS face outwards (an assembly of many small parts: one
+    decomposition rather than a geom or more per screw)."""
+    shells = mesh.split(only_watertight=True)
+    closed = sum(len(s.faces) for s in shells) == len(mesh.faces)
+    shells = [s for s in shells if s.volume > 0]
+    if not closed or not shells or len(shells) > _MAX_SHELLS:
+        shells = [mesh]
+    pieces: list[trimesh.Trimesh] = []
+    for shell in shells:
+        parts, method, note = _decompose_once(shell, c, 0)
+        if note:
+            notes.append(f"{what}: {note.replace('the part', 'it')}")
+        pieces += parts
+    return pieces
+
+
 def _surface_points(mesh: trimesh.Trimesh, c: SimConstants, seed: int) -> np.ndarray:
     """`c.surface_samples` seeded points of the part's own surface (object frame)."""
     pts, _ = trimesh.sample.sample_surface(mesh, int(c.surface_samples), seed=int(seed))
@@ -555,6 +669,7 @@ def _xml(
     grip_force: float,
     *,
     palm_collides: bool = True,
+    gripper: SimGripper | None = None,
 ) -> str:
     t, fw, fd = spec.finger_thickness, spec.finger_width, spec.finger_depth
     half_stroke = spec.stroke / 2
@@ -570,19 +685,44 @@ def _xml(
         f'solref="{solref}" mass="0"/>'
         for k in range(len(pieces))
     )
-    # inner faces at x = -+stroke/2 when the joints are at 0 (fully open); a joint value q closes each finger by q
-    finger = (
-        f'<geom type="box" size="{t / 2:.9g} {fw / 2:.9g} {fd / 2:.9g}" contype="1" conaffinity="2" condim="4" '
-        f'friction="{fric}" solref="{solref}"/>'
-    )
     palm = ""
-    box = spec.palm_box()
-    if box is not None:
-        palm = (
-            f'<geom name="palm" type="box" pos="{_fmt(box.center)}" size="{_fmt(np.asarray(box.extents) / 2)}" '
-            f'contype="{int(palm_collides)}" conaffinity="{2 * int(palm_collides)}" condim="4" friction="{fric}" '
-            f'solref="{solref}"/>'
+    if gripper is None:
+        # inner faces at x = -+stroke/2 when the joints are at 0 (fully open); a joint value q closes each finger by q
+        finger = (
+            f'<geom type="box" size="{t / 2:.9g} {fw / 2:.9g} {fd / 2:.9g}" contype="1" conaffinity="2" condim="4" '
+            f'friction="{fric}" solref="{solref}"/>'
         )
+        fingers = (finger, finger)
+        finger_pos = half_stroke + t / 2
+        box = spec.palm_box()
+        if box is not None:
+            palm = (
+                f'<geom name="palm" type="box" pos="{_fmt(box.center)}" size="{_fmt(np.asarray(box.extents) / 2)}" '
+                f'contype="{int(palm_collides)}" conaffinity="{2 * int(palm_collides)}" condim="4" friction="{fric}" '
+                f'solref="{solref}"/>'
+            )
+    else:
+        # each finger body is its finger frame, at x = -+stroke/2 when the joints are at 0 (fully open), carrying
+        # the finger's convex pieces; the body's pieces are static geoms of the grasp frame in the palm's role
+        extra = []
+        fingers = []
+        for side, parts in zip(("f0_", "f1_"), gripper.fingers, strict=True):
+            extra += [_mesh_asset(f"{side}{k}", p) for k, p in enumerate(parts)]
+            fingers.append(
+                "\n      ".join(
+                    f'<geom type="mesh" mesh="{side}{k}" contype="1" conaffinity="2" condim="4" friction="{fric}" '
+                    f'solref="{solref}"/>'
+                    for k in range(len(parts))
+                )
+            )
+        extra += [_mesh_asset(f"body{k}", p) for k, p in enumerate(gripper.body)]
+        assets = "\n".join([assets, *extra])
+        palm = "\n    ".join(
+            f'<geom name="body{k}" type="mesh" mesh="body{k}" contype="{int(palm_collides)}" '
+            f'conaffinity="{2 * int(palm_collides)}" condim="4" friction="{fric}" solref="{solref}"/>'
+            for k in range(len(gripper.body))
+        )
+        finger_pos = half_stroke
     close_range = max(half_stroke - spec.min_width / 2, 0.0)
     I = inertia
     full = _fmt([I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]])
@@ -597,15 +737,15 @@ def _xml(
   </asset>
   <worldbody>
     {palm}
-    <body name="finger0" pos="{-(half_stroke + t / 2):.9g} 0 0">
+    <body name="finger0" pos="{-finger_pos:.9g} 0 0">
       <joint name="close0" type="slide" axis="1 0 0" range="0 {close_range:.9g}" damping="{c.finger_damping:.9g}"/>
       <inertial pos="0 0 0" mass="{fm:.9g}" diaginertia="1e-5 1e-5 1e-5"/>
-      {finger}
+      {fingers[0]}
     </body>
-    <body name="finger1" pos="{half_stroke + t / 2:.9g} 0 0">
+    <body name="finger1" pos="{finger_pos:.9g} 0 0">
       <joint name="close1" type="slide" axis="-1 0 0" range="0 {close_range:.9g}" damping="{c.finger_damping:.9g}"/>
       <inertial pos="0 0 0" mass="{fm:.9g}" diaginertia="1e-5 1e-5 1e-5"/>
-      {finger}
+      {fingers[1]}
     </body>
     <body name="part">
       <freejoint name="part"/>
@@ -622,6 +762,10 @@ def _xml(
   </actuator>
 </mujoco>
 """
+
+
+def _mesh_asset(name: str, mesh: trimesh.Trimesh) -> str:
+    return f'<mesh name="{name}" vertex="{_fmt(mesh.vertices)}" face="{_fmt(np.asarray(mesh.faces).astype(int))}"/>'
 
 
 def prepare_part(
@@ -679,14 +823,20 @@ def _assemble(
     *,
     mass_note: str | None = None,
     surface_points: np.ndarray | None = None,
+    gripper: SimGripper | None = None,
 ) -> SimPart:
-    """The SimPart of a checked part: its decomposition under `constants` and the MuJoCo model."""
+    """The SimPart of a checked part: its decomposition under `constants` and the MuJoCo model (`gripper`: the CAD
+    gripper's pieces when already built, e.g. for a finer decomposition of the same part)."""
     import mujoco
 
     mass, com, inertia = mass_properties
+    if gripper is None:
+        gripper = _sim_gripper(spec, constants)
     pieces, geometry, note = _decompose(mesh, constants, seed)
-    notes = [n for n in (note, mass_note) if n]
-    model = mujoco.MjModel.from_xml_string(_xml(pieces, spec, mu, mass, com, inertia, constants, force))
+    notes = [n for n in (note, mass_note, *(gripper.notes if gripper else ())) if n]
+    model = mujoco.MjModel.from_xml_string(
+        _xml(pieces, spec, mu, mass, com, inertia, constants, force, gripper=gripper)
+    )
     if geometry == "coacd" and surface_points is None:
         surface_points = _surface_points(mesh, constants, seed)
     return SimPart(
@@ -706,6 +856,7 @@ def _assemble(
         surface_points=surface_points if geometry == "coacd" else None,
         mesh=mesh,
         seed=int(seed),
+        gripper=gripper,
     )
 
 
@@ -752,7 +903,10 @@ class _Grasp:
             mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "finger0"),
             mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "finger1"),
         )
-        self.palm_geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "palm")
+        # the static geoms that take the palm's role: the palm box, or every piece of a CAD gripper's body
+        names = ["palm"] if sim.gripper is None else [f"body{k}" for k in range(len(sim.gripper.body))]
+        ids = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, name) for name in names]
+        self.palm_geoms = np.array([g for g in ids if g >= 0], dtype=np.int64)
         T = np.asarray(T_object_grasp, dtype=np.float64)
         # T_grasp_object, with a small seeded placement error
         T_go = np.linalg.inv(T)
@@ -765,14 +919,20 @@ class _Grasp:
         self.midpoint_object = T[:3, 3].copy()  # the contact midpoint in the object frame
         spec = sim.spec
         self.inside = bool(inside)
+        if self.inside and sim.gripper is not None:
+            raise InvalidParameterError(
+                "inside grasps need box fingers: a CAD finger's pad is on its inner face", field="inside"
+            )
         if not self.inside:  # inner faces at the pre-grasp opening, closing inwards
             self.q_open = max((spec.stroke - spec.open_width(width)) / 2, 0.0)
         else:  # inside grasps mirror the fingers: outer faces at the narrower pre-grasp width, opening outwards
             o = spec.solids().open_width(width, inside=True)
             self.q_open = min(max(spec.stroke / 2 - (o / 2 - spec.finger_thickness), 0.0), spec.stroke / 2)
-        # the approach starts where the fingers' leading edge (z = +finger_depth / 2) is below the part's lowest point
+        # the approach starts where the fingers' leading edge (z = +finger_depth / 2; a CAD gripper's highest z) is
+        # below the part's lowest point
+        top = spec.finger_depth / 2 if sim.gripper is None else sim.gripper.top_z
         z = (sim.vertices @ self.R0.T + self.p0)[:, 2]
-        self.approach_distance = max(spec.finger_depth / 2 - float(z.min()) + self.c.approach_step, 0.0)
+        self.approach_distance = max(top - float(z.min()) + self.c.approach_step, 0.0)
 
     # -- helpers ---------------------------------------------------------------------------------------------------
     def _set_part(self, p: np.ndarray) -> None:
@@ -821,8 +981,10 @@ class _Grasp:
     def _path_meets_the_part(self) -> bool:
         """Does the gripper's way in meet the part's own surface (not only a convex piece)? The approach is a
         translation along +Z, so each of the palm's and the open fingers' boxes sweeps a box, from where it starts
-        to the grasp; a surface sample inside one (shrunk by the approach tolerance) is a collision. Without
-        surface samples (a convex part, or the hull as the fallback) the pieces are the part."""
+        to the grasp; a surface sample inside one (shrunk by the approach tolerance) is a collision. A CAD gripper's
+        solids are its exact meshes (the open fingers and the body), each eroded by the approach tolerance and moved
+        along +Z into place (meshsweep.SweptMesh). Without surface samples (a convex part, or the hull as the
+        fallback) the pieces are the part."""
         pts = self.sim.surface_points
         if pts is None:
             return True
@@ -832,6 +994,13 @@ class _Grasp:
         p, R = self._part_pose()
         q = pts @ R.T + p  # the part at the grasp, in the gripper's frame
         tol = self.c.approach_tolerance
+        gripper = self.sim.gripper
+        if gripper is not None:
+            left, right, body = gripper.swept
+            for solid, b in ((left, self.finger_bodies[0]), (right, self.finger_bodies[1])):
+                if solid.any_hit(q - d.xpos[b], self.approach_distance):  # the finger's frame, fingers open
+                    return True
+            return body is not None and body.any_hit(q, self.approach_distance)
         for g in range(m.ngeom):
             if m.geom_bodyid[g] == self.part_body or m.geom_type[g] != mj.mjtGeom.mjGEOM_BOX:
                 continue
@@ -855,16 +1024,17 @@ class _Grasp:
         return None if dist is None else float(np.max(dist)) * 1e3
 
     def _palm_penetration(self) -> float:
-        """The deepest penetration (m, >= 0) of the part's pieces into the palm in the current state."""
-        if self.palm_geom < 0:
+        """The deepest penetration (m, >= 0) of the part's pieces into the palm (or any piece of a CAD gripper's
+        body) in the current state."""
+        if len(self.palm_geoms) == 0:
             return 0.0
         n = self.d.ncon
         con = self.d.contact
-        palm = (con.geom1[:n] == self.palm_geom) | (con.geom2[:n] == self.palm_geom)
+        palm = np.isin(con.geom1[:n], self.palm_geoms) | np.isin(con.geom2[:n], self.palm_geoms)
         return max(0.0, -float(np.min(con.dist[:n][palm]))) if palm.any() else 0.0
 
     def _without_palm(self) -> None:
-        """Go on in the model whose palm collides with nothing, from the same state."""
+        """Go on in the model whose palm (a CAD gripper's body) collides with nothing, from the same state."""
         m = self.sim.model_for(self.p, palm=False)
         d = self.mj.MjData(m)
         d.qpos[:] = self.d.qpos

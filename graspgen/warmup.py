@@ -5,7 +5,8 @@ every kernel is declared with `cache=True`, so once compiled it is loaded from d
 runs the code paths that production runs, on small inputs, so that each kernel is compiled with the argument types
 it will see: `generate()` on a mesh in both collision modes, inside grasps, quality selection, the hold criterion
 (when this version of graspgen has it), a point cloud without normals (normal estimation), re-clustering, the
-renderer and the memory probe. `graspgen warmup` (scripts/setup.sh, services/Dockerfile) calls it.
+renderer, the memory probe and the validation's approach test of a CAD gripper's solids. `graspgen warmup`
+(scripts/setup.sh, services/Dockerfile) calls it.
 
 Where the cache lives: `NUMBA_CACHE_DIR` when set, otherwise `__pycache__` beside each module. The cache is valid
 for this CPU and these sources (numba checks both), so build it on the machine, or the image, that runs the jobs.
@@ -80,6 +81,7 @@ def warmup(*, log: Any = None) -> dict[str, Any]:
     from .clustering import compile_parallel_kernels
 
     step("clustering, parallel assignment", compile_parallel_kernels)
+    step("validation, a CAD gripper's approach", _sweep)
     root = cache_dir()
     return {
         "seconds": time.perf_counter() - t_all,
@@ -87,6 +89,16 @@ def warmup(*, log: Any = None) -> dict[str, Any]:
         "index_files": _cache_files(root),
         "steps": steps,
     }
+
+
+def _sweep() -> None:
+    """The kernels that test a CAD gripper's solids on their way in (physics validation)."""
+    from .meshsweep import SweptMesh
+
+    solid = SweptMesh.of(trimesh.creation.box(extents=(0.01, 0.02, 0.03)).triangles, 0.001)
+    points = np.random.default_rng(0).uniform(-0.02, 0.02, size=(64, 3))
+    solid.hits(points, 0.01)
+    solid.contains(points)
 
 
 def _npz(points: np.ndarray) -> bytes:
