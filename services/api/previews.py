@@ -51,16 +51,25 @@ def _init_render_process() -> None:
 
 
 def render_png(
-    part_bytes: bytes, units: str, file_type: str, export_json: bytes, size: tuple[int, int]
+    part_bytes: bytes,
+    units: str,
+    file_type: str,
+    export_json: bytes,
+    size: tuple[int, int],
+    gripper_files: dict[str, bytes] | None = None,
 ) -> bytes:  # pragma: no cover - runs in a render process (tested through the API)
-    """Draw one preview (runs in a render process): the part from its stored bytes, the export's grippers."""
+    """Draw one preview (runs in a render process): the part from its stored bytes, the export's grippers (a
+    gripper from CAD with its mesh files, `gripper_files` by the names its geometry gives)."""
     import json
 
+    from graspgen.gripper import GripperSpec
     from graspgen.parts import load_part
     from graspgen.render import render_grasp_set
 
     part = load_part(part_bytes, units=units, file_type=file_type)
-    return render_grasp_set(part.surface_mesh(), json.loads(export_json), size=size)
+    export = json.loads(export_json)
+    gripper = GripperSpec.from_dict(export["gripper"], files=gripper_files) if gripper_files else None
+    return render_grasp_set(part.surface_mesh(), export, size=size, gripper=gripper)
 
 
 class PreviewRenderer:

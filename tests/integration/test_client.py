@@ -176,3 +176,16 @@ def test_a_gripper_with_mesh_files_through_the_client(embedded_stack, tmp_path):
         gg.upload_object(cylinder_stl(), name=obj, units="mm", filename="cyl.stl")
         job = gg.wait(gg.submit_job(obj, "pgn-80-vgroove", params=SMALL), timeout=300)
         assert gg.grasp_set(job["grasp_set"])["gripper"] == first["spec"]
+        # the preview draws the CAD gripper: the render process rebuilds it from the files in storage
+        import io
+
+        from PIL import Image
+
+        png = gg._http.get(f"/v1/grasp-sets/{job['grasp_set']}/preview.png", params={"size": "320x240"})
+        assert png.status_code == 200, png.text
+        assert Image.open(io.BytesIO(png.content)).size == (320, 240)
+        # the pick query's planes read the meshes: a floor far below the part leaves grasps, one through it none
+        far = gg.pick(np.eye(4), grasp_set=job["grasp_set"], planes=[{"point": [0, 0, -1], "normal": [0, 0, 1]}])
+        assert far["grasps"]
+        cut = gg.pick(np.eye(4), grasp_set=job["grasp_set"], planes=[{"point": [0, 0, 0], "normal": [0, 0, 1]}])
+        assert len(cut["grasps"]) < len(far["grasps"]) or cut["feasible"] < far["feasible"]

@@ -3,10 +3,14 @@ while the request holds a database connection."""
 
 from __future__ import annotations
 
+import json
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Path, Query, Request, Response
 from starlette.concurrency import run_in_threadpool
+
+from services.common.grippers import file_digests
+from services.common.storage import blob_key
 
 from ..crud import grasp_sets as crud
 from ..deps import ReadDep
@@ -98,9 +102,12 @@ async def get_preview(
         try:
             export = exports.get(ref.export_key)
             part = storage.get_bytes(ref.object_file_key)
+            # a gripper from CAD is drawn with its meshes: the export names them by digest
+            digests = file_digests(json.loads(export).get("gripper") or {})
+            files = {name: storage.get_bytes(blob_key(sha)) for name, sha in digests.items()}
         except FileNotFoundError:
             raise ApiError(503, "artifact-missing", "a file of this grasp set is missing from storage") from None
-        return part, ref.object_units, ref.object_format, export, (W, H)
+        return part, ref.object_units, ref.object_format, export, (W, H), files
 
     renderer: PreviewRenderer = request.app.state.previews
     try:
