@@ -35,7 +35,9 @@ from ._frame import (
 )
 from ._hull import build_hull, hull_free
 from ._regions import (
+    FINGER_ROWS,
     HY,
+    MOVES,
     RIN,
     RIN2,
     RMAX,
@@ -360,8 +362,8 @@ def _remember(memo, phase, cell, p):
 def _phase_rows(regions, phase):
     """The rows a phase tests: the fingers (phase 0) or the fixed regions (phase 1)."""
     if phase == 0:
-        return 0, regions.fingers
-    return regions.fingers, regions.rows.shape[0]
+        return 0, FINGER_ROWS
+    return FINGER_ROWS, regions.rows.shape[0]
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -386,10 +388,7 @@ def _probe(F, tree, regions, rolls, xr, target, phase, work, cell0, cell1, st):
                 if p < 0:
                     continue
                 st[_MEMO_TESTS] += 1
-                if r1 == 2:  # box fingers: the loop over their two rows, inlined with constant bounds, unrolls
-                    mask |= _point_mask(tree, p, F, rows, 0, 2, xr, rolls, target & ~mask)
-                else:
-                    mask |= _point_mask(tree, p, F, rows, r0, r1, xr, rolls, target & ~mask)
+                mask |= _point_mask(tree, p, F, rows, r0, r1, xr, rolls, target & ~mask)
                 if mask == target:
                     st[_MEMO_SETTLED] += 1
                     return mask
@@ -416,10 +415,7 @@ def _probe(F, tree, regions, rolls, xr, target, phase, work, cell0, cell1, st):
         if p < 0:
             continue
         st[_CACHE_TESTS] += 1
-        if phase == 0 and r1 == 2:
-            mask |= _point_mask(tree, p, F, rows, 0, 2, xr, rolls, target & ~mask)
-        else:
-            mask |= _point_mask(tree, p, F, rows, r0, r1, xr, rolls, target & ~mask)
+        mask |= _point_mask(tree, p, F, rows, r0, r1, xr, rolls, target & ~mask)
         if mask == target:
             st[_CACHE_SETTLED] += 1
             return mask
@@ -527,14 +523,24 @@ def _walk(F, tree, regions, rolls, xr, target, phase, work, cell0, cell1, st):
             ryc, hy, zlo, zhi = rows[r, YC], rows[r, HY], rows[r, ZLO], rows[r, ZHI]
             near = np.uint64(0)
             ball_in = np.uint64(0)
-            for k in range(kmax):
-                yk = cos_k[k] * yc0 + sin_k[k] * zc0
-                zk = cos_k[k] * zc0 - sin_k[k] * yc0
-                ayk = abs(yk - ryc)
-                reach_k = (ayk - rho <= hy) & (zk + rho >= zlo) & (zk - rho <= zhi)
-                in_k = (ayk + rho <= hy) & (zk - rho >= zlo) & (zk + rho <= zhi)
-                near |= np.uint64(reach_k) << np.uint64(k)
-                ball_in |= np.uint64(in_k) << np.uint64(k)
+            if ryc == 0.0:  # a region centred on the axis (every box gripper's): one subtraction less per roll
+                for k in range(kmax):
+                    yk = cos_k[k] * yc0 + sin_k[k] * zc0
+                    zk = cos_k[k] * zc0 - sin_k[k] * yc0
+                    ayk = abs(yk)
+                    reach_k = (ayk - rho <= hy) & (zk + rho >= zlo) & (zk - rho <= zhi)
+                    in_k = (ayk + rho <= hy) & (zk - rho >= zlo) & (zk + rho <= zhi)
+                    near |= np.uint64(reach_k) << np.uint64(k)
+                    ball_in |= np.uint64(in_k) << np.uint64(k)
+            else:
+                for k in range(kmax):
+                    yk = cos_k[k] * yc0 + sin_k[k] * zc0
+                    zk = cos_k[k] * zc0 - sin_k[k] * yc0
+                    ayk = abs(yk - ryc)
+                    reach_k = (ayk - rho <= hy) & (zk + rho >= zlo) & (zk - rho <= zhi)
+                    in_k = (ayk + rho <= hy) & (zk - rho >= zlo) & (zk + rho <= zhi)
+                    near |= np.uint64(reach_k) << np.uint64(k)
+                    ball_in |= np.uint64(in_k) << np.uint64(k)
             if sym:
                 near |= near << np.uint64(half)
                 ball_in |= ball_in << np.uint64(half)
@@ -658,7 +664,7 @@ def _chunk(lo, hi, cands, tree, regions, rolls, hull, work, out, st):
     with the thread's Work (memo, recent blockers, stack). Its own function, called from the parallel loop, which
     numba compiles far faster than the same code in the loop's body; the frame and x ranges are its own arrays."""
     nr = regions.rows.shape[0]
-    fixed = nr > regions.fingers
+    fixed = nr > FINGER_ROWS
     full = rolls.full
     grid = work.grid
     F = np.empty(12)
@@ -779,7 +785,7 @@ def _prepare(P: np.ndarray, N: np.ndarray | None, model: CollisionModel, rolls: 
     cells = np.full((numba.config.NUMBA_NUM_THREADS, 2, int(np.prod(dims)), _MEMO_SLOTS), -1, dtype=np.int64)
     regions = region_table(model, prefilter=True)
     rows = regions.rows
-    fixed = rows[regions.fingers :]
+    fixed = rows[FINGER_ROWS:][rows[FINGER_ROWS:, MOVES] == 0.0]
     threshold = -float(np.max(fixed[:, ZHI])) - 4.0 * pad if len(fixed) else 0.0
     return Prepared(tree, regions, roll_table(rolls), build_hull(P, threshold), Memo(cells, grid))
 

@@ -32,7 +32,7 @@ from ._meshsolid import MeshSet
 from ._solids import BoxGripper, GripperSolids
 from ._tritree import empty_tree
 
-__all__ = ["Region", "CollisionModel", "collision_model", "approach_reach", "Regions", "region_table"]
+__all__ = ["Region", "CollisionModel", "collision_model", "approach_reach", "Regions", "region_table", "FINGER_ROWS"]
 
 # The columns of a region row (region_table): MOVES (-1, +1: the finger it moves with; 0: fixed); X0, X1 (the
 # bounds along X: in the finger's frame for a moving region, in the grasp frame for a fixed one); YC, HY (centre and
@@ -46,11 +46,14 @@ __all__ = ["Region", "CollisionModel", "collision_model", "approach_reach", "Reg
 MOVES, X0, X1, YC, HY, ZLO, ZHI, RMIN, RMAX, RIN, RMIN2, RMAX2, RIN2, SYM, SOLID = range(15)
 COLUMNS = 15
 
-#: The region table as the kernels read it: rows (r, COLUMNS) float64, the fingers' rows first, then the fixed
-#: regions; fingers: how many rows move with the fingers (2 for box fingers, one per finger; more for the boxes
-#: inside CAD fingers); travel = (finger thickness, stroke, min_width, clearance, inner margin), metres
-#: (finger_x_ranges).
-Regions = namedtuple("Regions", ["rows", "fingers", "travel"])
+#: rows 0 and 1 of a region table are the -X and the +X finger, one box each (a compile-time constant of the
+#: kernels: their loops over the fingers unroll); the fixed regions follow, then (the point kernel's prefilter of a
+#: CAD gripper) further boxes inside the fingers, tested with the fixed regions
+FINGER_ROWS = 2
+
+#: The region table as the kernels read it: rows (r, COLUMNS) float64, ordered as FINGER_ROWS says; travel =
+#: (finger thickness, stroke, min_width, clearance, inner margin), metres (finger_x_ranges).
+Regions = namedtuple("Regions", ["rows", "travel"])
 
 
 @dataclass(frozen=True)
@@ -154,10 +157,12 @@ def region_table(model: CollisionModel, guard: float = TOLERANCES.guard, *, pref
     lo_g, hi_g = 1.0 - guard, 1.0 + guard
     rows = []
     regions = model.prefilter if prefilter and model.prefilter is not None else model.regions
-    moving = [r.moves for r in regions if r.moves != 0]
-    if sorted(set(moving)) != [-1, 1] or any(r.moves != 0 for r in regions[len(moving) :]):
-        raise ValueError("a collision model has regions for both fingers, before the fixed ones")
-    for reg in sorted(regions, key=lambda r: r.moves == 0):
+    first = [next((r for r in regions if r.moves == m), None) for m in (-1, 1)]
+    if first[0] is None or first[1] is None:
+        raise ValueError("a collision model has a region for each finger")
+    fixed = [r for r in regions if r.moves == 0]
+    more = [r for r in regions if r.moves != 0 and r is not first[0] and r is not first[1]]
+    for reg in [*first, *fixed, *more]:
         ylo, yhi = reg.lo[1], reg.hi[1]
         yc, hy = (ylo + yhi) / 2, (yhi - ylo) / 2
         if reg.moves < 0:  # the -X finger is turned half a turn about Z: y -> -y
@@ -179,13 +184,13 @@ def region_table(model: CollisionModel, guard: float = TOLERANCES.guard, *, pref
         rows.append(row + [r_min * r_min * lo_g, r_max * r_max * hi_g, r_in2, sym, float(reg.solid)])
     travel = np.array([model.finger_thickness, model.stroke, model.min_width, model.clearance, model.inner_margin])
     table = np.array(rows, dtype=np.float64).reshape(-1, COLUMNS)
-    return Regions(table, len(moving), travel)
+    return Regions(table, travel)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
 def finger_x_ranges(xr, inside, w, regions):
     """The moving regions' bounds along X in the grasp frame for one candidate of closing width `w` (inside: an
-    inside grasp), into xr[r, 0:2] for the finger rows: each finger's box swept over its travel from the
+    inside grasp), into xr[r, 0:2] for every row that moves: each finger's box swept over its travel from the
     pre-grasp opening to the contact, less the inner margin at the contact."""
     rows = regions.rows
     t, stroke, min_width, clearance, margin = (
@@ -201,7 +206,18 @@ def finger_x_ranges(xr, inside, w, regions):
     else:
         o = max(w - clearance, min_width + 2 * t)
         a, b = min(o, w) / 2, w / 2 - margin
-    for r in range(regions.fingers):
+    for r in range(FINGER_ROWS):
+        if not inside:
+            lo, hi = a + rows[r, X0], b + rows[r, X1]
+        else:
+            lo, hi = a - rows[r, X1], b - rows[r, X0]
+        if rows[r, MOVES] < 0:
+            xr[r, 0], xr[r, 1] = -hi, -lo
+        else:
+            xr[r, 0], xr[r, 1] = lo, hi
+    for r in range(FINGER_ROWS, rows.shape[0]):  # further boxes inside CAD fingers
+        if rows[r, MOVES] == 0.0:
+            continue
         if not inside:
             lo, hi = a + rows[r, X0], b + rows[r, X1]
         else:
@@ -233,6 +249,7 @@ def finger_travel(inside, w, regions):
 
 @njit(cache=True, inline="always", error_model="numpy")
 def fixed_x_ranges(xr, regions):
-    """The fixed regions' bounds along X into xr[r, 0:2] for the rows after the fingers'."""
-    for r in range(regions.fingers, regions.rows.shape[0]):
-        xr[r, 0], xr[r, 1] = regions.rows[r, X0], regions.rows[r, X1]
+    """The fixed regions' bounds along X into xr[r, 0:2]."""
+    for r in range(FINGER_ROWS, regions.rows.shape[0]):
+        if regions.rows[r, MOVES] == 0.0:
+            xr[r, 0], xr[r, 1] = regions.rows[r, X0], regions.rows[r, X1]

@@ -28,6 +28,7 @@ from ._frame import (
     roll_table,
 )
 from ._regions import (
+    FINGER_ROWS,
     HY,
     MOVES,
     RMAX,
@@ -165,10 +166,10 @@ def _vertex_x_range(verts, q0, q1, F):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _meets_finger_slab(masks, top, blocked, rx, fingers, x_lo, x_hi):
-    """Does [x_lo, x_hi] meet the slab of a finger region (the first `fingers` rows) that still has rolls to test
-    at stack entry `top`?"""
-    for r in range(fingers):  # noqa: SIM110 (numba compiles no generator passed to any())
+def _meets_finger_slab(masks, top, blocked, rx, x_lo, x_hi):
+    """Does [x_lo, x_hi] meet the slab of a finger region (rows 0 and 1) that still has rolls to test at stack
+    entry `top`?"""
+    for r in range(FINGER_ROWS):  # noqa: SIM110 (numba compiles no generator passed to any())
         if masks[top, r] & ~blocked and rx[r, 0] <= x_hi and x_lo <= rx[r, 1]:
             return True
     return False
@@ -226,7 +227,7 @@ def _walk(todo, tree, regions, rolls, solids, g, work):
         x_lo = max(x - xh, ox - oh) - g
         x_hi = min(x + xh, ox + oh) + g
         inner = children[k, LEFT] >= 0
-        if vstart[k + 1] > vstart[k] and _meets_finger_slab(masks, top, blocked, rx, regions.fingers, x_lo, x_hi):
+        if vstart[k + 1] > vstart[k] and _meets_finger_slab(masks, top, blocked, rx, x_lo, x_hi):
             # a small node whose boxes meet a finger's slab: the range of its own vertices instead. The boxes of a
             # curved patch stick out past a contact's margin where its triangles do not; the triangle loop below
             # skips a region by the same numbers, so this only prunes what it would skip. Above the leaves only
@@ -240,7 +241,7 @@ def _walk(todo, tree, regions, rolls, solids, g, work):
                 e_lo, e_hi = _vertex_x_range(verts, vstart[k], vstart[k + 1], F)
                 x_lo, x_hi = max(x_lo, e_lo - g), min(x_hi, e_hi + g)
                 tally[cls, 0] += 1
-                if not _meets_finger_slab(masks, top, blocked, rx, regions.fingers, x_lo, x_hi):
+                if not _meets_finger_slab(masks, top, blocked, rx, x_lo, x_hi):
                     tally[cls, 1] += 1
         any_hit = np.uint64(0)
         have_ob = False
@@ -255,7 +256,7 @@ def _walk(todo, tree, regions, rolls, solids, g, work):
                 continue
             if rc + rad < rows[r, RMIN] or rc - rad > rows[r, RMAX]:
                 continue
-            if r < regions.fingers and inner:
+            if r < FINGER_ROWS and inner:
                 # the fingers' boxes are small: their per-roll tests prune little above the leaves
                 hit[r] = live
                 any_hit |= live
@@ -313,7 +314,7 @@ def _walk(todo, tree, regions, rolls, solids, g, work):
                         w[c, 2] = -v[c, 1] * sk + v[c, 2] * ck
                     if tri_box(w, boxes_c[r], boxes_e[r]):
                         sol = int(rows[r, SOLID])
-                        if sol < 0:
+                        if solids is None or sol < 0:
                             blocked |= bit
                         else:
                             moves = int(rows[r, MOVES])
@@ -340,59 +341,74 @@ def region_boxes(regions, rx, boxes_c, boxes_e):
         boxes_e[r, 2] = 0.5 * (rows[r, ZHI] - rows[r, ZLO])
 
 
-@njit(parallel=True, cache=True, error_model="numpy")
-def _mesh_kernel(cands, free, tree, regions, rolls, left, right, body, g, nthreads):
-    """Clear in free (n, R) bool every roll at which some triangle of the tree meets some region."""
+@njit(cache=True, error_model="numpy")
+def _mesh_thread(t, nthreads, cands, free, tree, regions, rolls, solids, g):
+    """Thread t's share of the mesh-exact check: chunks t, t + nthreads, ... of the candidates (the work varies
+    along the candidates' spatial order, and a static split into one run per thread leaves one thread with most of
+    it). Clears in free (n, R) bool every roll at which some triangle of the tree meets some region; `solids`: the
+    mesh solids (left, right, body) or None for a gripper of boxes (the leaf test then compiles without them)."""
     n = cands.inside.shape[0]
     R = rolls.cos.shape[0]
     nreg = regions.rows.shape[0]
     chunks = (n + _CHUNK - 1) // _CHUNK
-    # thread t takes chunks t, t + T, ...: the work varies along the candidates' spatial order, and a static split
-    # into one run per thread leaves one thread with most of it
-    for t in prange(nthreads):
-        work = MeshWork(
-            np.empty(12),
-            np.empty((nreg, 2)),
-            np.empty((nreg, 3)),
-            np.empty((nreg, 3)),
-            np.empty((R, 6)),
-            np.empty((2, 3, 3)),
-            np.empty(128, dtype=np.int64),
-            np.empty((128, nreg), dtype=np.uint64),
-            np.empty(nreg, dtype=np.uint64),
-            np.empty(15),
-            np.zeros((8, 2), dtype=np.int64),
-            np.zeros(2),
-            np.empty((3, 3)),
-            np.empty(128, dtype=np.int64),
-        )
-        F, rot = work.F, work.rot
-        fixed_x_ranges(work.rx, regions)
-        for ch in range(t, chunks, nthreads):
-            work.tally[:, :] = 0
-            for i in range(ch * _CHUNK, min(n, (ch + 1) * _CHUNK)):
-                todo = np.uint64(0)
-                for k in range(R):
-                    if free[i, k]:
-                        todo |= np.uint64(1) << np.uint64(k)
-                if todo == 0:
-                    continue
-                mx, my, mz, ax, ay, az, wd = candidate_frame(cands, i)
-                yx, yy, yz, zx, zy, zz = roll0_basis(ax, ay, az, rolls.switch)
+    work = MeshWork(
+        np.empty(12),
+        np.empty((nreg, 2)),
+        np.empty((nreg, 3)),
+        np.empty((nreg, 3)),
+        np.empty((R, 6)),
+        np.empty((2, 3, 3)),
+        np.empty(128, dtype=np.int64),
+        np.empty((128, nreg), dtype=np.uint64),
+        np.empty(nreg, dtype=np.uint64),
+        np.empty(15),
+        np.zeros((8, 2), dtype=np.int64),
+        np.zeros(2),
+        np.empty((3, 3)),
+        np.empty(128, dtype=np.int64),
+    )
+    F, rot = work.F, work.rot
+    fixed_x_ranges(work.rx, regions)
+    for ch in range(t, chunks, nthreads):
+        work.tally[:, :] = 0
+        for i in range(ch * _CHUNK, min(n, (ch + 1) * _CHUNK)):
+            todo = np.uint64(0)
+            for k in range(R):
+                if free[i, k]:
+                    todo |= np.uint64(1) << np.uint64(k)
+            if todo == 0:
+                continue
+            mx, my, mz, ax, ay, az, wd = candidate_frame(cands, i)
+            yx, yy, yz, zx, zy, zz = roll0_basis(ax, ay, az, rolls.switch)
+            for rl in range(R):
+                c, s = rolls.cos[rl], rolls.sin[rl]
+                rot[rl, 0], rot[rl, 1], rot[rl, 2] = c * yx + s * zx, c * yy + s * zy, c * yz + s * zz
+                rot[rl, 3], rot[rl, 4], rot[rl, 5] = -s * yx + c * zx, -s * yy + c * zy, -s * yz + c * zz
+            finger_x_ranges(work.rx, cands.inside[i], wd, regions)
+            work.travel[0], work.travel[1] = finger_travel(cands.inside[i], wd, regions)
+            region_boxes(regions, work.rx, work.boxes_c, work.boxes_e)
+            F[0], F[1], F[2] = mx, my, mz
+            F[3], F[4], F[5], F[6], F[7], F[8], F[9], F[10], F[11] = ax, ay, az, yx, yy, yz, zx, zy, zz
+            blocked = _walk(todo, tree, regions, rolls, solids, g, work)
+            if blocked != 0:
                 for rl in range(R):
-                    c, s = rolls.cos[rl], rolls.sin[rl]
-                    rot[rl, 0], rot[rl, 1], rot[rl, 2] = c * yx + s * zx, c * yy + s * zy, c * yz + s * zz
-                    rot[rl, 3], rot[rl, 4], rot[rl, 5] = -s * yx + c * zx, -s * yy + c * zy, -s * yz + c * zz
-                finger_x_ranges(work.rx, cands.inside[i], wd, regions)
-                work.travel[0], work.travel[1] = finger_travel(cands.inside[i], wd, regions)
-                region_boxes(regions, work.rx, work.boxes_c, work.boxes_e)
-                F[0], F[1], F[2] = mx, my, mz
-                F[3], F[4], F[5], F[6], F[7], F[8], F[9], F[10], F[11] = ax, ay, az, yx, yy, yz, zx, zy, zz
-                blocked = _walk(todo, tree, regions, rolls, (left, right, body), g, work)
-                if blocked != 0:
-                    for rl in range(R):
-                        if blocked & (np.uint64(1) << np.uint64(rl)):
-                            free[i, rl] = False
+                    if blocked & (np.uint64(1) << np.uint64(rl)):
+                        free[i, rl] = False
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _mesh_kernel(cands, free, tree, regions, rolls, g, nthreads):
+    """The mesh-exact check of a gripper of boxes, over nthreads threads."""
+    for t in prange(nthreads):
+        _mesh_thread(t, nthreads, cands, free, tree, regions, rolls, None, g)
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _mesh_kernel_solids(cands, free, tree, regions, rolls, left, right, body, g, nthreads):
+    """The mesh-exact check of a gripper from CAD (its solids left, right, body: TriangleTrees), over nthreads
+    threads (numba's parallel loops take flat records: the solids' tuple is made inside)."""
+    for t in prange(nthreads):
+        _mesh_thread(t, nthreads, cands, free, tree, regions, rolls, (left, right, body), g)
 
 
 def mesh_free_rolls(
@@ -443,7 +459,12 @@ def _run(tree: MeshTree, cands, free, model: CollisionModel, switch: float | Non
     # the node tests' guard band: far beyond the rounding of the boxes' bounds and of the tests themselves
     g = TOLERANCES.guard * 2.0 * float(np.max(tree.nodes[0, M_H : M_H + 3])) + TOLERANCES.guard_floor
     with numba.parallel_chunksize(1):
-        left, right, body = model.solid_records()
         regions = region_table(model)
-        _mesh_kernel(cands, out, tree.record(), regions, rolls, left, right, body, g, numba.get_num_threads())
+        if model.meshes is None:  # boxes only: the kernel compiled without the solids' leaf test
+            _mesh_kernel(cands, out, tree.record(), regions, rolls, g, numba.get_num_threads())
+        else:
+            left, right, body = model.solid_records()
+            _mesh_kernel_solids(
+                cands, out, tree.record(), regions, rolls, left, right, body, g, numba.get_num_threads()
+            )
     return out
