@@ -146,7 +146,7 @@ def region_table(model: CollisionModel, guard: float = TOLERANCES.guard) -> Regi
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def finger_x_ranges(xr, inside, w, regions):
+def finger_x_ranges(xr: np.ndarray, inside: bool, w: float, regions: Regions) -> None:
     """The moving regions' bounds along X in the grasp frame for one candidate of closing width `w` (inside: an
     inside grasp), into xr[r, 0:2] for the finger rows: each finger's box swept over its travel from the
     pre-grasp opening to the contact, less the inner margin at the contact."""
@@ -176,7 +176,7 @@ def finger_x_ranges(xr, inside, w, regions):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def fixed_x_ranges(xr, regions):
+def fixed_x_ranges(xr: np.ndarray, regions: Regions) -> None:
     """The fixed regions' bounds along X into xr[r, 0:2] for the rows after the fingers'."""
     for r in range(FINGER_ROWS, regions.rows.shape[0]):
         xr[r, 0], xr[r, 1] = regions.rows[r, X0], regions.rows[r, X1]

@@ -15,7 +15,7 @@ finger frame; the palm is a box of the grasp frame behind the fingers.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, overload
 
 import numpy as np
 
@@ -26,16 +26,24 @@ Vec3 = tuple[float, float, float]
 
 class BoxGripper(Protocol):
     """What the solids read of a gripper spec (graspgen.gripper.GripperSpec; read by attribute, because gripper.py
-    builds its boxes from this package)."""
+    builds its boxes from this package). Read-only members, so that a frozen dataclass satisfies it."""
 
-    stroke: float
-    min_width: float
-    finger_width: float
-    finger_depth: float
-    finger_thickness: float
-    palm_depth: float
-    palm_width: float | None
-    pregrasp_clearance: float
+    @property
+    def stroke(self) -> float: ...
+    @property
+    def min_width(self) -> float: ...
+    @property
+    def finger_width(self) -> float: ...
+    @property
+    def finger_depth(self) -> float: ...
+    @property
+    def finger_thickness(self) -> float: ...
+    @property
+    def palm_depth(self) -> float: ...
+    @property
+    def palm_width(self) -> float | None: ...
+    @property
+    def pregrasp_clearance(self) -> float: ...
 
 
 @dataclass(frozen=True)
@@ -72,6 +80,8 @@ class GripperSolids:
     def of(cls, spec: BoxGripper) -> GripperSolids:
         t, fw, fd = spec.finger_thickness, spec.finger_width, spec.finger_depth
         finger = Cuboid((0.0, -fw / 2, -fd / 2), (t, fw / 2, fd / 2))
+        # GripperSpec.__post_init__ fills palm_width (the finger's width when the spec leaves it out)
+        assert spec.palm_width is not None
         palm = None
         if spec.palm_depth > 0:
             half_x = spec.stroke / 2 + t
@@ -89,7 +99,11 @@ class GripperSolids:
         """The fingers' base: their lowest z (the palm's front face when there is a palm), grasp frame."""
         return self.finger.lo[2]
 
-    def open_width(self, width, *, inside: bool = False):
+    @overload
+    def open_width(self, width: float, *, inside: bool = False) -> float: ...
+    @overload
+    def open_width(self, width: np.ndarray, *, inside: bool = False) -> np.ndarray: ...
+    def open_width(self, width: float | np.ndarray, *, inside: bool = False) -> float | np.ndarray:
         """The pre-grasp opening for the contact distance `width` (float or array): min(width + clearance, stroke);
         for an inside grasp (the fingers open outwards onto the part) the narrower max(width - clearance, min_width
         + 2 thickness), the fingers' outer faces then."""

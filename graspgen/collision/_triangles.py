@@ -17,6 +17,7 @@ the answer is the triangle test's, so the masks are those of testing every trian
 from __future__ import annotations
 
 from collections import namedtuple
+from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
@@ -44,6 +45,10 @@ from ._regions import (
     fixed_x_ranges,
     region_table,
 )
+
+if TYPE_CHECKING:
+    from ._frame import Candidates, Rolls
+    from ._regions import Regions
 
 __all__ = ["MeshTree", "build_tree", "normal_spread_rad", "mesh_free_rolls", "mesh_free_rolls_of_pairs"]
 
@@ -91,7 +96,7 @@ class MeshTree:
         children: np.ndarray,
         vstart: np.ndarray,
         verts: np.ndarray,
-    ):
+    ) -> None:
         self.triangles = triangles
         self.normals = normals
         self.nodes = nodes
@@ -131,7 +136,9 @@ def build_tree(vertices: np.ndarray, faces: np.ndarray) -> MeshTree:
 
 
 @njit(cache=True)
-def _node_vertices(faces, V, children, max_triangles):
+def _node_vertices(
+    faces: np.ndarray, V: np.ndarray, children: np.ndarray, max_triangles: int
+) -> tuple[np.ndarray, np.ndarray]:
     """The distinct vertices (by index) of each node of at most `max_triangles` triangles, in (3, total) SoA with
     offsets per node: a stamp per vertex index marks the ones a node has listed already."""
     nn = children.shape[0]
@@ -163,7 +170,7 @@ def _node_vertices(faces, V, children, max_triangles):
 
 
 @njit(cache=True)
-def _build(T, order, nodes, children):
+def _build(T: np.ndarray, order: np.ndarray, nodes: np.ndarray, children: np.ndarray) -> int:
     """Fill nodes[k] (columns M_*) and children[k] = (left, right, start, count) by median splits of the triangles'
     centroids along the longest axis of their extent, at most _LEAF triangles per leaf; leaves have left = -1.
     Returns the node count. The oriented box suits the long thin triangles of curved walls (an arc's axis-aligned
@@ -229,7 +236,7 @@ def _build(T, order, nodes, children):
 
 
 @njit(cache=True)
-def _oriented_box(T, order, a0, b0, out):
+def _oriented_box(T: np.ndarray, order: np.ndarray, a0: int, b0: int, out: np.ndarray) -> None:
     """The oriented box of the vertices of triangles T[order[a0:b0]] into out[M_OC:] (see _build): axes by principal
     components, bounds by projection."""
     cnt = 3 * (b0 - a0)
@@ -283,7 +290,16 @@ def normal_spread_rad(tree: MeshTree, points: np.ndarray, normals: np.ndarray, t
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _spread_kernel(P, N, T, TN, nodes, children, tol, out):
+def _spread_kernel(
+    P: np.ndarray,
+    N: np.ndarray,
+    T: np.ndarray,
+    TN: np.ndarray,
+    nodes: np.ndarray,
+    children: np.ndarray,
+    tol: float,
+    out: np.ndarray,
+) -> None:
     for i in prange(P.shape[0]):
         px, py, pz = P[i, 0], P[i, 1], P[i, 2]
         lowest = 1.0
@@ -314,7 +330,7 @@ def _spread_kernel(P, N, T, TN, nodes, children, tol, out):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _point_triangle_dist2(px, py, pz, T, t):
+def _point_triangle_dist2(px: float, py: float, pz: float, T: np.ndarray, t: int) -> float:
     """Squared distance from p to triangle t (Ericson, Real-Time Collision Detection 5.1.5)."""
     ax, ay, az = T[t, 0, 0], T[t, 0, 1], T[t, 0, 2]
     bx, by, bz = T[t, 1, 0], T[t, 1, 1], T[t, 1, 2]
@@ -354,19 +370,20 @@ def _point_triangle_dist2(px, py, pz, T, t):
             v = vb * denom
             w = vc * denom
             qx, qy, qz = ax + abx * v + acx * w, ay + aby * v + acy * w, az + abz * v + acz * w
-    return (px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2
+    dist2: float = (px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2
+    return dist2
 
 
 # -- regions against triangles ---------------------------------------------------------------------------------------
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _axis_test(p0, p1, p2, r):
+def _axis_test(p0: float, p1: float, p2: float, r: float) -> bool:
     return min(p0, p1, p2) > r or max(p0, p1, p2) < -r
 
 
 @njit(cache=True, error_model="numpy")
-def tri_box(v, c, e):
+def tri_box(v: np.ndarray, c: np.ndarray, e: np.ndarray) -> bool:
     """Does the triangle v (3, 3) meet the closed axis-aligned box with centre c (3,) and half extents e (3,)?
     (Akenine-Moeller's separating-axis test: the box's 3 axes, the triangle's normal, 9 edge cross products.)"""
     x0, y0, z0 = v[0, 0] - c[0], v[0, 1] - c[1], v[0, 2] - c[2]
@@ -405,11 +422,20 @@ def tri_box(v, c, e):
     nz = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
     d = nx * x0 + ny * y0 + nz * z0
     r = ex * abs(nx) + ey * abs(ny) + ez * abs(nz)
-    return abs(d) <= r
+    meets: bool = abs(d) <= r
+    return meets
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _node_meets_box(nd, q, X, rot_k, cs, box, g):
+def _node_meets_box(
+    nd: np.ndarray,
+    q: tuple[float, float, float],
+    X: tuple[float, float, float],
+    rot_k: np.ndarray,
+    cs: tuple[float, float],
+    box: tuple[float, float, float, float, float, float],
+    g: float,
+) -> bool:
     """May the node's axis-aligned box meet a region's box at a roll? q = (x, y0, z0): the node's centre in the
     candidate's roll-0 frame; X: the closing axis; rot_k (6,): the roll's Y and Z in the object frame; cs = (cos,
     sin) of the roll; box = (centre x, half x, centre y, half y, centre z, half z) of the region in the roll's grasp
@@ -436,11 +462,14 @@ def _node_meets_box(nd, q, X, rot_k, cs, box, g):
         return False
     if abs(wy) > ey + bex * abs(ay) + bey * abs(Yy) + bez * abs(Zy) + g:
         return False
-    return abs(wz) <= ez + bex * abs(az) + bey * abs(Yz) + bez * abs(Zz) + g
+    meets: bool = abs(wz) <= ez + bex * abs(az) + bey * abs(Yz) + bez * abs(Zz) + g
+    return meets
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _obb_meets_box(ob, cs, box, g):
+def _obb_meets_box(
+    ob: np.ndarray, cs: tuple[float, float], box: tuple[float, float, float, float, float, float], g: float
+) -> bool:
     """May the node's oriented box meet a region's box at a roll? ob: the node's oriented box in the candidate's
     roll-0 frame (centre x, y0, z0, then per box axis i its components along X, Y0, Z0 and its half extent:
     ob[3 + 4 i : 7 + 4 i]); cs, box as for _node_meets_box. Separating axes: the region's Y and Z and the box's own
@@ -460,11 +489,12 @@ def _obb_meets_box(ob, cs, box, g):
         sz += e * abs(uZ)
         if abs(dX * pX + dY * uY + dZ * uZ) > e + bex * abs(pX) + bey * abs(uY) + bez * abs(uZ) + g:
             return False
-    return abs(dY) <= bey + sy + g and abs(dZ) <= bez + sz + g
+    meets: bool = abs(dY) <= bey + sy + g and abs(dZ) <= bez + sz + g
+    return meets
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _oriented_in_frame(nd, F, ob):
+def _oriented_in_frame(nd: np.ndarray, F: np.ndarray, ob: np.ndarray) -> None:
     """The node's oriented box in the candidate's roll-0 frame (F: midpoint, X, Y0, Z0) into ob (_obb_meets_box)."""
     qx, qy, qz = nd[M_OC] - F[0], nd[M_OC + 1] - F[1], nd[M_OC + 2] - F[2]
     ob[0] = qx * F[3] + qy * F[4] + qz * F[5]
@@ -479,7 +509,7 @@ def _oriented_in_frame(nd, F, ob):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _vertex_x_range(verts, q0, q1, F):
+def _vertex_x_range(verts: np.ndarray, q0: int, q1: int, F: np.ndarray) -> tuple[float, float]:
     """The smallest and largest coordinate along the closing axis of verts[:, q0:q1], with the triangle loop's own
     arithmetic (_walk)."""
     lo = np.inf
@@ -492,7 +522,9 @@ def _vertex_x_range(verts, q0, q1, F):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _meets_finger_slab(masks, top, blocked, rx, x_lo, x_hi):
+def _meets_finger_slab(
+    masks: np.ndarray, top: int, blocked: np.uint64, rx: np.ndarray, x_lo: float, x_hi: float
+) -> bool:
     """Does [x_lo, x_hi] meet the slab of a finger region that still has rolls to test at stack entry `top`?"""
     for r in range(FINGER_ROWS):  # noqa: SIM110 (numba compiles no generator passed to any())
         if masks[top, r] & ~blocked and rx[r, 0] <= x_hi and x_lo <= rx[r, 1]:
@@ -501,7 +533,7 @@ def _meets_finger_slab(masks, top, blocked, rx, x_lo, x_hi):
 
 
 @njit(cache=True, error_model="numpy")
-def _walk(todo, tree, regions, rolls, g, work):
+def _walk(todo: np.uint64, tree: TriangleTree, regions: Regions, rolls: Rolls, g: float, work: MeshWork) -> np.uint64:
     """The rolls of `todo` at which some triangle meets some region, for the candidate in work.F (midpoint, X, Y0,
     Z0) with its regions in work.rx, work.boxes_c, work.boxes_e: one walk of the tree carrying, per region, the rolls
     still to test. Its own function, called from the parallel loop (inlined in the loop's body it ran slower)."""
@@ -643,7 +675,7 @@ def _walk(todo, tree, regions, rolls, g, work):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def region_boxes(regions, rx, boxes_c, boxes_e):
+def region_boxes(regions: Regions, rx: np.ndarray, boxes_c: np.ndarray, boxes_e: np.ndarray) -> None:
     """The regions' boxes in a roll's grasp frame for one candidate, from their bounds along X in rx (r, 2):
     centres and half extents into boxes_c, boxes_e (r, 3)."""
     rows = regions.rows
@@ -657,7 +689,9 @@ def region_boxes(regions, rx, boxes_c, boxes_e):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _mesh_kernel(cands, free, tree, regions, rolls, g, nthreads):
+def _mesh_kernel(
+    cands: Candidates, free: np.ndarray, tree: TriangleTree, regions: Regions, rolls: Rolls, g: float, nthreads: int
+) -> None:
     """Clear in free (n, R) bool every roll at which some triangle of the tree meets some region."""
     n = cands.inside.shape[0]
     R = rolls.cos.shape[0]
@@ -741,7 +775,9 @@ def mesh_free_rolls_of_pairs(
     return _run(tree, candidates_of_pairs(points, i, j, inside), free, model, switch)
 
 
-def _run(tree: MeshTree, cands, free, model: CollisionModel, switch: float | None) -> np.ndarray:
+def _run(
+    tree: MeshTree, cands: Candidates, free: np.ndarray, model: CollisionModel, switch: float | None
+) -> np.ndarray:
     free = np.ascontiguousarray(free, dtype=bool)
     n, R = free.shape
     if candidate_count(cands) != n or len(cands.inside) != n:
