@@ -8,7 +8,7 @@ import tempfile
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 
@@ -81,7 +81,7 @@ class Candidates:
         }
 
 
-def load_candidates(path: str | os.PathLike[str]) -> Candidates:
+def load_candidates(path: str | os.PathLike[str] | IO[bytes]) -> Candidates:
     """Read a candidate NPZ back, checking shapes so that a damaged file fails with a clear reason."""
     try:
         with np.load(path, allow_pickle=False) as z:
