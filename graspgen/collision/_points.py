@@ -778,7 +778,7 @@ def _free_rolls_kernel(
     for t in prange(nthreads):
         caches = np.full((2, _CACHE), -1, dtype=np.int64)  # recent blockers: fingers, fixed regions
         pos = np.zeros(2, dtype=np.int64)
-        work = Work(np.empty(128, dtype=np.int64), caches, pos, memo.cells[numba.get_thread_id()], memo.grid)  # type: ignore[attr-defined]  # numba's __all__ omits it
+        work = Work(np.empty(128, dtype=np.int64), caches, pos, memo.cells[numba.get_thread_id()], memo.grid)
         for c in range(t, nchunks, nthreads):
             _chunk(c * _CHUNK, min((c + 1) * _CHUNK, m), cands, tree, regions, rolls, hull, work, out, stats[c])
 
