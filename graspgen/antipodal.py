@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 from numba import njit, prange
@@ -82,7 +83,19 @@ def _grid(points: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np.n
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _judge(X, Y, Z, NX, NY, NZ, C2, i, j, lims, inside_ok):
+def _judge(
+    X: np.ndarray,
+    Y: np.ndarray,
+    Z: np.ndarray,
+    NX: np.ndarray,
+    NY: np.ndarray,
+    NZ: np.ndarray,
+    C2: np.ndarray,
+    i: int | np.int64,
+    j: int,
+    lims: np.ndarray,
+    inside_ok: bool,
+) -> tuple[bool, bool, bool, bool, bool]:
     """(accepted, bad orientation, passes (a) and (b), inside, passes (c) without the tolerance) for the pair
     (i, j); branch-free. C2: per point, cos^2 of its cone within the position tolerance (cos2 where no spread)."""
     lo2, hi2, out_lo2, out_hi2, in_lo2, in_hi2, cos2 = lims[0], lims[1], lims[2], lims[3], lims[4], lims[5], lims[6]
@@ -107,7 +120,20 @@ def _judge(X, Y, Z, NX, NY, NZ, C2, i, j, lims, inside_ok):
 
 
 @njit(cache=True, error_model="numpy")
-def _count_run(X, Y, Z, NX, NY, NZ, C2, i, start, stop, lims, inside_ok):
+def _count_run(
+    X: np.ndarray,
+    Y: np.ndarray,
+    Z: np.ndarray,
+    NX: np.ndarray,
+    NY: np.ndarray,
+    NZ: np.ndarray,
+    C2: np.ndarray,
+    i: int | np.int64,
+    start: int,
+    stop: int,
+    lims: np.ndarray,
+    inside_ok: bool,
+) -> tuple[int, int, int, int]:
     # no stores in this loop, so that it vectorises
     n_acc = 0
     n_bad = 0
@@ -123,7 +149,24 @@ def _count_run(X, Y, Z, NX, NY, NZ, C2, i, start, stop, lims, inside_ok):
 
 
 @njit(cache=True, error_model="numpy")
-def _fill_run(X, Y, Z, NX, NY, NZ, C2, i, start, stop, lims, inside_ok, out_j, out_inside, pos, end):
+def _fill_run(
+    X: np.ndarray,
+    Y: np.ndarray,
+    Z: np.ndarray,
+    NX: np.ndarray,
+    NY: np.ndarray,
+    NZ: np.ndarray,
+    C2: np.ndarray,
+    i: int | np.int64,
+    start: int,
+    stop: int,
+    lims: np.ndarray,
+    inside_ok: bool,
+    out_j: np.ndarray,
+    out_inside: np.ndarray,
+    pos: int,
+    end: int,
+) -> int:
     # 64 pairs at a time: their verdicts packed into a word by a branch-free (vectorised) loop, then the few
     # accepted ones (~3 %) stored in order. The row's count is known from the counting pass: stop at `end`
     for b0 in range(start, stop, 64):
@@ -146,28 +189,28 @@ def _fill_run(X, Y, Z, NX, NY, NZ, C2, i, start, stop, lims, inside_ok, out_j, o
 
 @njit(parallel=True, cache=True, error_model="numpy")
 def _pairs_kernel(
-    X,
-    Y,
-    Z,
-    NX,
-    NY,
-    NZ,
-    C2,
-    cell_start,
-    dims,
-    origin,
-    cell,
-    reach,
-    lims,
-    inside_ok,
-    fill,
-    offsets,
-    out_j,
-    out_inside,
-    counters,
-    r0,
-    r1,
-):
+    X: np.ndarray,
+    Y: np.ndarray,
+    Z: np.ndarray,
+    NX: np.ndarray,
+    NY: np.ndarray,
+    NZ: np.ndarray,
+    C2: np.ndarray,
+    cell_start: np.ndarray,
+    dims: np.ndarray,
+    origin: np.ndarray,
+    cell: float,
+    reach: int,
+    lims: np.ndarray,
+    inside_ok: bool,
+    fill: bool,
+    offsets: np.ndarray,
+    out_j: np.ndarray,
+    out_inside: np.ndarray,
+    counters: np.ndarray,
+    r0: int,
+    r1: int,
+) -> None:
     # rows r0 <= i < r1; row i has n - 1 - i partners: pairing row r0 + k with row r1 - 1 - k balances the threads
     for k in prange((r1 - r0 + 1) // 2):
         for side in range(2):
@@ -202,28 +245,28 @@ def _pairs_kernel(
 
 @njit(cache=True, error_model="numpy")
 def _pairs_row(
-    X,
-    Y,
-    Z,
-    NX,
-    NY,
-    NZ,
-    C2,
-    cell_start,
-    dims,
-    origin,
-    cell,
-    reach,
-    lims,
-    inside_ok,
-    fill,
-    offsets,
-    out_j,
-    out_inside,
-    counters,
-    i,
-    base,
-):
+    X: np.ndarray,
+    Y: np.ndarray,
+    Z: np.ndarray,
+    NX: np.ndarray,
+    NY: np.ndarray,
+    NZ: np.ndarray,
+    C2: np.ndarray,
+    cell_start: np.ndarray,
+    dims: np.ndarray,
+    origin: np.ndarray,
+    cell: float,
+    reach: int,
+    lims: np.ndarray,
+    inside_ok: bool,
+    fill: bool,
+    offsets: np.ndarray,
+    out_j: np.ndarray,
+    out_inside: np.ndarray,
+    counters: np.ndarray,
+    i: int | np.int64,
+    base: int,
+) -> None:
     xi, yi, zi = X[i], Y[i], Z[i]
     ci = min(max(int((xi - origin[0]) / cell), 0), dims[0] - 1)
     cj = min(max(int((yi - origin[1]) / cell), 0), dims[1] - 1)
@@ -256,7 +299,7 @@ def _pairs_row(
     counters[i, 3] = n_pass_c
 
 
-def _cone_cos2(half: float, cos2: float, spread, order: np.ndarray, n: int) -> np.ndarray:
+def _cone_cos2(half: float, cos2: float, spread: np.ndarray | None, order: np.ndarray, n: int) -> np.ndarray:
     """Per point (in grid order), cos^2 of the cone its contact angle must stay in: cos^2(half - spread), or a
     value no pair reaches (4) when the spread alone exceeds the half-angle; exactly cos2 where the spread is 0."""
     c2 = np.full(n, cos2)
@@ -280,8 +323,18 @@ class PairPlan:
     """
 
     def __init__(
-        self, points, normals, *, stroke, min_width, friction, safety_factor, inside, finger_thickness, spread=None
-    ):
+        self,
+        points: np.ndarray,
+        normals: np.ndarray,
+        *,
+        stroke: float,
+        min_width: float,
+        friction: float,
+        safety_factor: float,
+        inside: bool,
+        finger_thickness: float,
+        spread: np.ndarray | None = None,
+    ) -> None:
         p = np.ascontiguousarray(points, dtype=np.float64)
         nrm = np.ascontiguousarray(normals, dtype=np.float64)
         n = len(p)
@@ -307,7 +360,11 @@ class PairPlan:
         self.order = order
         self.identity = bool(np.array_equal(order, np.arange(n)))
         ps, ns = p[order], nrm[order]
-        soa = tuple(np.ascontiguousarray(a[:, k]) for a in (ps, ns) for k in range(3))
+        # x, y, z of the points, then of the normals (cast: a generator's tuple has no length to mypy)
+        soa = cast(
+            tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+            tuple(np.ascontiguousarray(a[:, k]) for a in (ps, ns) for k in range(3)),
+        )
         lims = np.array([lo * lo, hi * hi, out_lo**2, out_hi**2, in_lo**2, in_hi**2, cos2])
         c2 = _cone_cos2(half, cos2, spread, order, n)
         self._args = (*soa, c2, cell_start, dims, origin, cell, 2, lims, bool(inside))
@@ -441,4 +498,5 @@ def friction_margin_deg(
     c0 = np.clip(sign * np.sum(normals[i] * d, axis=1), -1.0, 1.0)
     c1 = np.clip(-sign * np.sum(normals[j] * d, axis=1), -1.0, 1.0)
     worst = np.maximum(libm.arccos(c0), libm.arccos(c1))
-    return np.degrees(half_angle_rad - worst)
+    margin: np.ndarray = np.degrees(half_angle_rad - worst)
+    return margin

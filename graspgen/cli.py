@@ -16,12 +16,17 @@ import traceback
 import uuid
 from dataclasses import fields
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, NoReturn, cast
 
 from .errors import Cancelled, GraspgenError, InvalidUnitsError
 from .examples import EXAMPLE_GRIPPER
 from .params import Params, QualityOptions, param_options
 from .units import UNIT_SCALE
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Mapping
+
+    from .export import GraspSet
 
 __all__ = ["main", "DEMO_GRIPPER"]
 
@@ -34,7 +39,7 @@ class _UsageError(Exception):
 
 
 class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # argparse exits 2 as well; keep the message to one line
+    def error(self, message: str) -> NoReturn:  # argparse exits 2 as well; keep the message to one line
         raise _UsageError(message)
 
 
@@ -190,10 +195,10 @@ def _run_params(
     return params_cls(**_run_kwargs(args, params_cls)), options_cls(**_quality_kwargs(args, options_cls))
 
 
-def _preview_of(mesh_path: str, units: str):
+def _preview_of(mesh_path: str, units: str) -> Callable[[GraspSet], bytes]:
     """A function result -> PNG bytes drawing the result on the part (a point cloud: on its convex hull)."""
 
-    def preview(result) -> bytes:
+    def preview(result: GraspSet) -> bytes:
         from .parts import load_part
         from .render import render_grasp_set
 
@@ -227,14 +232,15 @@ def _render(args: argparse.Namespace) -> int:
 def _gripper_import(args: argparse.Namespace) -> int:
     from .urdf import import_urdf
 
-    approach = None
+    approach: tuple[float, float, float] | None = None
     if args.approach is not None:
         try:
-            approach = tuple(float(v) for v in args.approach.split(","))
+            xyz = tuple(float(v) for v in args.approach.split(","))
         except ValueError:
-            approach = ()
-        if len(approach) != 3:
+            xyz = ()
+        if len(xyz) != 3:
             raise GraspgenError(f"--approach must be three numbers X,Y,Z, got {args.approach!r}")
+        approach = xyz
     packages = {}
     for item in args.package:
         name, sep, folder = item.partition("=")
@@ -253,6 +259,7 @@ def _gripper_import(args: argparse.Namespace) -> int:
     from .gripper import GripperSpec
 
     spec = GripperSpec.load(spec_path)
+    assert spec.geometry is not None  # import_urdf writes a spec with geometry
     files = ", ".join(sorted(spec.geometry.sha256))
     print(f"wrote {spec_path} ({files}): stroke {spec.stroke * 1e3:.4g} mm, min_width {spec.min_width * 1e3:.4g} mm")
     return 0
@@ -339,7 +346,13 @@ def _demo(args: argparse.Namespace) -> int:
     return code
 
 
-def _run_and_write(run, outputs: dict[str, Path | None], *, quiet: bool, preview=None) -> int:
+def _run_and_write(
+    run: Callable[[Path | None, _ProgressBar], GraspSet],
+    outputs: Mapping[str, Path | None],
+    *,
+    quiet: bool,
+    preview: Callable[[GraspSet], bytes] | None = None,
+) -> int:
     """Run, then move every output into place only when all of them were written: nothing half-done."""
     tag = uuid.uuid4().hex[:8]
     temps: dict[str, Path] = {}
@@ -358,9 +371,10 @@ def _run_and_write(run, outputs: dict[str, Path | None], *, quiet: bool, preview
         if "candidates" in temps:
             result.save_candidates(temps["candidates"])
         if "preview" in temps:
+            assert preview is not None  # a preview output comes with its function
             temps["preview"].write_bytes(preview(result))
         for key, tmp in temps.items():
-            os.replace(tmp, outputs[key])
+            os.replace(tmp, cast(Path, outputs[key]))  # temps holds only the outputs that were given
         done = True
     finally:
         bar.close()
@@ -403,7 +417,7 @@ class _ProgressBar:
             self.open = False
 
 
-def _summary(result) -> str:
+def _summary(result: GraspSet) -> str:
     s = result.stats
     rej = s["rejected"]
     t = s["timings_s"]

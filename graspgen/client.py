@@ -119,7 +119,7 @@ class Client:
         *,
         timeout: float = 30.0,
         retries: int = 3,
-        cache_dir: str | os.PathLike | None = None,
+        cache_dir: str | os.PathLike[str] | None = None,
         transport: httpx.BaseTransport | None = None,
     ) -> None:
         headers = {"Accept": "application/json, application/problem+json"}
@@ -160,13 +160,13 @@ class Client:
             return r
         raise AssertionError("unreachable")
 
-    def _get(self, url: str, **kw: Any) -> Any:
-        return self._send("GET", url, safe=True, **kw).json()
+    def _get(self, url: str, **kw: Any) -> dict[str, Any]:
+        return _object(self._send("GET", url, safe=True, **kw))
 
     # -- objects and grippers --------------------------------------------------------------------------------------
     def upload_object(
         self,
-        file: str | os.PathLike | bytes,
+        file: str | os.PathLike[str] | bytes,
         *,
         name: str,
         units: str,
@@ -185,7 +185,7 @@ class Client:
         if mass_kg is not None:
             form["mass_kg"] = str(mass_kg)
         # an upload is idempotent (same bytes, same version), so it is safe to send again
-        return self._send("POST", "/v1/objects", safe=True, files={"file": (filename, data)}, data=form).json()
+        return _object(self._send("POST", "/v1/objects", safe=True, files={"file": (filename, data)}, data=form))
 
     def object(self, name: str) -> dict[str, Any]:
         return self._get(f"/v1/objects/{name}")
@@ -194,8 +194,8 @@ class Client:
         self,
         spec: Mapping[str, Any] | Any,
         *,
-        files: Mapping[str, bytes | str | os.PathLike] | None = None,
-        base_dir: str | os.PathLike | None = None,
+        files: Mapping[str, bytes | str | os.PathLike[str]] | None = None,
+        base_dir: str | os.PathLike[str] | None = None,
     ) -> dict[str, Any]:
         """Register a gripper spec (dict or graspgen.GripperSpec); an identical spec gives the existing version.
 
@@ -205,7 +205,7 @@ class Client:
         body = spec.to_dict() if hasattr(spec, "to_dict") else dict(spec)
         names = _geometry_files(body)
         if not names:
-            return self._send("POST", "/v1/grippers", safe=True, json=_jsonable(body)).json()
+            return _object(self._send("POST", "/v1/grippers", safe=True, json=_jsonable(body)))
         if files is not None:  # every file given goes: the server names a missing or an extra one (422)
             given = {n: v if isinstance(v, bytes) else Path(v).read_bytes() for n, v in files.items()}
         elif base_dir is not None:
@@ -215,9 +215,9 @@ class Client:
         parts = [(n, (n.rsplit("/", 1)[-1], data, "application/octet-stream")) for n, data in given.items()]
         form = {"spec": json.dumps(_jsonable(body))}
         # registering is idempotent (the same spec and files give the same version), so it is safe to send again
-        return self._send("POST", "/v1/grippers", safe=True, data=form, files=parts).json()
+        return _object(self._send("POST", "/v1/grippers", safe=True, data=form, files=parts))
 
-    def upload_gripper(self, spec_path: str | os.PathLike) -> dict[str, Any]:
+    def upload_gripper(self, spec_path: str | os.PathLike[str]) -> dict[str, Any]:
         """Register the gripper spec in a JSON file, with the mesh files its geometry names (relative to it)."""
         path = Path(spec_path)
         return self.create_gripper(json.loads(path.read_text(encoding="utf-8")), base_dir=path.parent)
@@ -255,7 +255,7 @@ class Client:
         """Any job body of `POST /v1/jobs` (e.g. `{"kind": "cluster", "grasp_set": 17, "params": {...}}`)."""
         key = idempotency_key or str(uuid.uuid4())
         r = self._send("POST", "/v1/jobs", safe=True, json=_jsonable(dict(body)), headers={"Idempotency-Key": key})
-        return r.json()
+        return _object(r)
 
     def job(self, job: str | Mapping[str, Any]) -> dict[str, Any]:
         return self._get(f"/v1/jobs/{_job_id(job)}")
@@ -270,7 +270,7 @@ class Client:
         end = time.monotonic() + timeout
         while True:
             r = self._send("GET", url, safe=True)
-            body = r.json()
+            body = _object(r)
             if body["state"] in TERMINAL:
                 if raise_on_failure and body["state"] != "succeeded":
                     raise JobFailedError(body)
@@ -281,7 +281,7 @@ class Client:
             time.sleep(min(_retry_after(r, 1.0), left))
 
     def cancel(self, job: str | Mapping[str, Any]) -> dict[str, Any]:
-        return self._send("POST", f"/v1/jobs/{_job_id(job)}/cancel", safe=True).json()
+        return _object(self._send("POST", f"/v1/jobs/{_job_id(job)}/cancel", safe=True))
 
     # -- grasp sets and the catalogue ------------------------------------------------------------------------------
     def grasp_set(self, grasp_set: int) -> dict[str, Any]:
@@ -311,11 +311,11 @@ class Client:
 
     def release(self, grasp_set: int) -> dict[str, Any]:
         """Make the set the released one of its object and gripper pair (scope write)."""
-        return self._send("POST", f"/v1/grasp-sets/{int(grasp_set)}/release", safe=True).json()
+        return _object(self._send("POST", f"/v1/grasp-sets/{int(grasp_set)}/release", safe=True))
 
     def withdraw(self, grasp_set: int) -> dict[str, Any]:
         """Stop the catalogue serving the set (scope write)."""
-        return self._send("POST", f"/v1/grasp-sets/{int(grasp_set)}/withdraw", safe=True).json()
+        return _object(self._send("POST", f"/v1/grasp-sets/{int(grasp_set)}/withdraw", safe=True))
 
     # -- pick ------------------------------------------------------------------------------------------------------
     def pick(
@@ -346,10 +346,10 @@ class Client:
         ):
             if value is not None:
                 body[key] = value
-        return self._send("POST", "/v1/pick", safe=True, json=_jsonable(body)).json()
+        return _object(self._send("POST", "/v1/pick", safe=True, json=_jsonable(body)))
 
     # -- the ETag cache --------------------------------------------------------------------------------------------
-    def _conditional(self, url: str) -> tuple[Any, dict[str, str], bool]:
+    def _conditional(self, url: str) -> tuple[dict[str, Any], dict[str, str], bool]:
         kept = self._cache.get(url) or self._load(url)
         headers = {"If-None-Match": kept["etag"]} if kept else {}
         r = self._send("GET", url, safe=True, headers=headers)
@@ -377,7 +377,7 @@ class Client:
         if path is None or not path.is_file():
             return None
         try:
-            entry = json.loads(path.read_text(encoding="utf-8"))
+            entry: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, ValueError):
             return None  # a damaged cache file is only a miss
         self._cache[url] = entry
@@ -390,6 +390,12 @@ class Client:
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
         tmp.write_text(json.dumps(entry), encoding="utf-8")
         os.replace(tmp, path)
+
+
+def _object(r: httpx.Response) -> dict[str, Any]:
+    """The response's JSON body, a JSON object for every endpoint the client reads it from."""
+    body: dict[str, Any] = r.json()
+    return body
 
 
 def _problem(r: httpx.Response) -> dict[str, Any]:

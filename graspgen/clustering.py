@@ -135,7 +135,7 @@ class TwoStageResult:
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _dot(X, i, Y, j):
+def _dot(X: np.ndarray, i: int, Y: np.ndarray, j: int) -> float:
     s = 0.0
     for c in range(X.shape[1]):
         s += X[i, c] * Y[j, c]
@@ -143,36 +143,39 @@ def _dot(X, i, Y, j):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _dist(X, i, Y, j, metric):
+def _dist(X: np.ndarray, i: int, Y: np.ndarray, j: int, metric: int) -> float:
     d = X.shape[1]
     if metric == _EUCLIDEAN:
         s = 0.0
         for c in range(d):
             t = X[i, c] - Y[j, c]
             s += t * t
-        return np.sqrt(s)
+        euclidean: float = np.sqrt(s)
+        return euclidean
     dot = _dot(X, i, Y, j)
     ac = abs(dot)
     if ac < _ACOS_SAFE:
-        return np.arccos(ac)
+        angle: float = np.arccos(ac)
+        return angle
     # near 0 rad arccos loses half its digits; the chord |a - s b| (s = sign(a . b)) is exact there (0 for a = +-b)
     sg = 1.0 if dot >= 0.0 else -1.0
     dm = 0.0
     for c in range(d):
         t = X[i, c] - sg * Y[j, c]
         dm += t * t
-    return 2.0 * np.arcsin(min(0.5 * np.sqrt(dm), 1.0))
+    chord_angle: float = 2.0 * np.arcsin(min(0.5 * np.sqrt(dm), 1.0))
+    return chord_angle
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _upper_row(X, i, metric, D):
+def _upper_row(X: np.ndarray, i: int, metric: int, D: np.ndarray) -> None:
     D[i, i] = 0.0
     for j in range(i + 1, X.shape[0]):
         D[i, j] = _dist(X, i, X, j, metric)
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _mirror_block_row(D, bi):
+def _mirror_block_row(D: np.ndarray, bi: int) -> None:
     # blocks of B x B rows/columns so that reading the upper triangle column-wise stays in cache
     n = D.shape[0]
     i0 = bi * _BLOCK
@@ -186,7 +189,7 @@ def _mirror_block_row(D, bi):
 
 
 @njit(cache=True, nogil=True)
-def _pairwise_serial(X, metric):
+def _pairwise_serial(X: np.ndarray, metric: int) -> np.ndarray:
     n = X.shape[0]
     D = np.empty((n, n))
     for i in range(n):
@@ -197,7 +200,7 @@ def _pairwise_serial(X, metric):
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def _pairwise_parallel(X, metric):
+def _pairwise_parallel(X: np.ndarray, metric: int) -> np.ndarray:
     n = X.shape[0]
     D = np.empty((n, n))
     for i in prange(n):
@@ -216,7 +219,7 @@ def _pairwise(X: np.ndarray, metric: int, threads: bool = True) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _nearest(X, i, C, metric):
+def _nearest(X: np.ndarray, i: int, C: np.ndarray, metric: int) -> tuple[int, float]:
     """Nearest row of C to row i of X (first one on ties) and the distance to it."""
     k = C.shape[0]
     best = np.inf
@@ -243,7 +246,7 @@ def _nearest(X, i, C, metric):
 
 
 @njit(cache=True, nogil=True)
-def _assign_serial(X, C, metric):
+def _assign_serial(X: np.ndarray, C: np.ndarray, metric: int) -> tuple[np.ndarray, np.ndarray]:
     n = X.shape[0]
     labels = np.empty(n, np.int32)
     dist = np.empty(n)
@@ -253,7 +256,7 @@ def _assign_serial(X, C, metric):
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def _assign_parallel(X, C, metric):
+def _assign_parallel(X: np.ndarray, C: np.ndarray, metric: int) -> tuple[np.ndarray, np.ndarray]:
     n = X.shape[0]
     labels = np.empty(n, np.int32)
     dist = np.empty(n)
@@ -276,7 +279,7 @@ def compile_parallel_kernels() -> None:
 
 
 @njit(cache=True, nogil=True)
-def _init_greedy_pp(D, k, u):
+def _init_greedy_pp(D: np.ndarray, k: int, u: np.ndarray) -> np.ndarray:
     """Greedy k-medoids++ on a dissimilarity matrix: seeding by distance (D^1) with 2 + ln k trials per medoid,
     keeping the trial that lowers the loss most. `u` (k, trials) uniforms in [0, 1) make it deterministic."""
     n = D.shape[0]
@@ -334,7 +337,7 @@ def _init_greedy_pp(D, k, u):
 
 
 @njit(cache=True, nogil=True)
-def _second(D, med, o, skip):
+def _second(D: np.ndarray, med: np.ndarray, o: int, skip: int) -> tuple[int, float]:
     """Nearest medoid of point o other than slot `skip`: (slot, distance)."""
     best = np.inf
     bi = -1
@@ -348,7 +351,7 @@ def _second(D, med, o, skip):
 
 
 @njit(cache=True, nogil=True)
-def _fasterpam_kernel(D, med, max_iter):
+def _fasterpam_kernel(D: np.ndarray, med: np.ndarray, max_iter: int) -> tuple[np.ndarray, float, int]:
     """FasterPAM from the medoids `med` (k >= 2, modified in place). Returns (labels, loss, n_iter)."""
     n = D.shape[0]
     k = med.shape[0]
@@ -454,7 +457,7 @@ def _fasterpam_kernel(D, med, max_iter):
 
 
 @njit(cache=True, nogil=True)
-def _is_symmetric(D, rtol, atol):
+def _is_symmetric(D: np.ndarray, rtol: float, atol: float) -> bool:
     n = D.shape[0]
     for i in range(n):
         for j in range(i + 1, n):
@@ -466,7 +469,7 @@ def _is_symmetric(D, rtol, atol):
 
 
 @njit(cache=True, nogil=True)
-def _one_medoid(D):
+def _one_medoid(D: np.ndarray) -> tuple[int, float]:
     """The exact 1-medoid: smallest row sum, smallest index on ties."""
     n = D.shape[0]
     best = np.inf
@@ -681,6 +684,7 @@ def _kmedoids(
             med, labels, loss, n_iter = _run(D, k, rng, max_iter)
             if best is None or loss < best[2]:
                 best = (med, labels, loss, n_iter)
+        assert best is not None  # draws >= 1
         return _result(best[2], best[0], best[1], best[3])
 
     s = min(sample_size, n)
@@ -701,6 +705,7 @@ def _kmedoids(
         loss = float(np.sum(dist))
         if best is None or loss < best[2]:
             best = (med, labels, loss, n_iter)
+    assert best is not None  # draws >= 1
     return _result(best[2], best[0], best[1], best[3])
 
 

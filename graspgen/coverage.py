@@ -41,7 +41,7 @@ class CoverageReport:
     min_pair_combined: float | None
 
     def to_json(self) -> dict[str, Any]:
-        def r(v):
+        def r(v: float | None) -> float | None:
             return None if v is None else round(float(v), 9)
 
         return {
@@ -66,7 +66,8 @@ def _unit(a: np.ndarray) -> np.ndarray:
 def axis_angles_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Sign-invariant angles (degrees, 0..90) between axes a (n, 3) and b (m, 3): (n, m)."""
     c = np.abs(_unit(a) @ _unit(b).T)
-    return np.degrees(libm.arccos(np.clip(c, 0.0, 1.0)))
+    deg: np.ndarray = np.degrees(libm.arccos(np.clip(c, 0.0, 1.0)))
+    return deg
 
 
 def combined_distance(
@@ -82,7 +83,8 @@ def combined_distance(
     pa = np.asarray(midpoints_a, dtype=np.float64).reshape(-1, 3)
     pb = np.asarray(midpoints_b, dtype=np.float64).reshape(-1, 3)
     dt = np.linalg.norm(pa[:, None, :] - pb[None, :, :], axis=2)
-    return np.maximum(dt / radius, axis_angles_deg(axes_a, axes_b) / angle_deg)
+    d: np.ndarray = np.maximum(dt / radius, axis_angles_deg(axes_a, axes_b) / angle_deg)
+    return d
 
 
 def coverage_shares(
@@ -109,7 +111,9 @@ def coverage_shares(
 
 
 @njit(parallel=True, cache=True)
-def _covered(P, U, Ps, Us, r2, cos_a):
+def _covered(
+    P: np.ndarray, U: np.ndarray, Ps: np.ndarray, Us: np.ndarray, r2: np.ndarray, cos_a: np.ndarray
+) -> np.ndarray:
     """(levels, n) bool: candidate i lies within level k of some selected grasp; stops at the first one found
     (the same tests as a full candidates x selected comparison, without building it)."""
     n, m, L = P.shape[0], Ps.shape[0], r2.shape[0]

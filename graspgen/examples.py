@@ -8,6 +8,7 @@ two disjoint closed bodies.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import cast
 
 import numpy as np
 import trimesh
@@ -45,7 +46,8 @@ def ring_screw() -> trimesh.Trimesh:
     to_xz = trimesh.transformations.rotation_matrix(np.pi / 2, [1.0, 0.0, 0.0])
     to_xz[2, 3] = centre_z
     eye = trimesh.creation.torus(ring_radius, wire_radius, major_sections=64, minor_sections=24, transform=to_xz)
-    return _finish(trimesh.util.concatenate([shank, eye]))
+    # concatenate is typed to return any Geometry; of meshes it gives a Trimesh
+    return _finish(cast(trimesh.Trimesh, trimesh.util.concatenate([shank, eye])))
 
 
 def bar() -> trimesh.Trimesh:

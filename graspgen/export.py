@@ -8,7 +8,7 @@ import tempfile
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 
@@ -43,16 +43,19 @@ class Candidates:
     # large): cached_property writes the instance __dict__ directly, which a frozen dataclass allows
     @cached_property
     def midpoints(self) -> np.ndarray:
-        return 0.5 * (self.contacts[:, 0] + self.contacts[:, 1])
+        mid: np.ndarray = 0.5 * (self.contacts[:, 0] + self.contacts[:, 1])
+        return mid
 
     @cached_property
     def widths(self) -> np.ndarray:
-        return np.linalg.norm(self.contacts[:, 1] - self.contacts[:, 0], axis=1)
+        width: np.ndarray = np.linalg.norm(self.contacts[:, 1] - self.contacts[:, 0], axis=1)
+        return width
 
     @cached_property
     def axes(self) -> np.ndarray:
         d = self.contacts[:, 1] - self.contacts[:, 0]
-        return d / np.linalg.norm(d, axis=1, keepdims=True)
+        axis: np.ndarray = d / np.linalg.norm(d, axis=1, keepdims=True)
+        return axis
 
     def __len__(self) -> int:
         return len(self.contacts)
@@ -78,7 +81,7 @@ class Candidates:
         }
 
 
-def load_candidates(path: str | os.PathLike) -> Candidates:
+def load_candidates(path: str | os.PathLike[str] | IO[bytes]) -> Candidates:
     """Read a candidate NPZ back, checking shapes so that a damaged file fails with a clear reason."""
     try:
         with np.load(path, allow_pickle=False) as z:
@@ -120,7 +123,7 @@ def _optional(data: dict[str, np.ndarray], key: str, shape: tuple[int, ...]) -> 
     return data[key].astype(np.float64)
 
 
-def write_atomic(path: str | os.PathLike, data: bytes) -> None:
+def write_atomic(path: str | os.PathLike[str], data: bytes) -> None:
     """Write to a temporary file beside `path` and rename it, so no reader ever sees half a file."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -165,10 +168,10 @@ class GraspSet:
         """Canonical bytes: the same inputs, parameters and seed give the same bytes (but for timings)."""
         return (json.dumps(self.to_json(), indent=1, allow_nan=False) + "\n").encode("utf-8")
 
-    def save(self, path: str | os.PathLike) -> None:
+    def save(self, path: str | os.PathLike[str]) -> None:
         write_atomic(path, self.to_json_bytes())
 
-    def save_candidates(self, path: str | os.PathLike) -> None:
+    def save_candidates(self, path: str | os.PathLike[str]) -> None:
         write_atomic(path, self.candidates_npz_bytes())
 
     def candidates_npz_bytes(self) -> bytes:
@@ -199,6 +202,8 @@ def npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
             with zf.open(info, "w", force_zip64=True) as f:
                 # the member's raw deflate stream from ISA-L instead of zlib (zipfile has no hook for the
                 # compressor; _ZipWriteFile of Python 3.11 calls only compress() and flush() on it)
-                f._compressor = isal_zlib.compressobj(NPZ_DEFLATE_LEVEL, isal_zlib.DEFLATED, -15)  # noqa: SLF001
+                f._compressor = isal_zlib.compressobj(  # type: ignore[attr-defined]  # IO[bytes] is a _ZipWriteFile
+                    NPZ_DEFLATE_LEVEL, isal_zlib.DEFLATED, -15
+                )
                 np.lib.format.write_array(f, np.asanyarray(a), allow_pickle=False)
     return buf.getvalue()

@@ -158,7 +158,7 @@ class GripperSpec:
         del kwargs["geometry"]
         # the scalar fields first (a bad name or stroke is named before any mesh is read); the box fields are
         # placeholders that __post_init__ replaces by the finger's extents
-        placeholder = dict.fromkeys(("finger_width", "finger_depth", "finger_thickness"), 1.0)
+        placeholder: dict[str, Any] = dict.fromkeys(("finger_width", "finger_depth", "finger_thickness"), 1.0)
         cls(**kwargs, **placeholder, kind=data.get("kind"))
         geometry = load_geometry(data["geometry"], files=files, base_dir=base_dir, max_decoded_bytes=max_decoded_bytes)
         return cls(**kwargs, **placeholder, geometry=geometry, kind=data.get("kind"))

@@ -143,7 +143,7 @@ class GripperGeometry:
         d["sha256"] = {name: self.sha256[name] for name in sorted(self.sha256)}
         return d
 
-    def _key(self) -> tuple:
+    def _key(self) -> tuple[object, ...]:
         return (self.units, tuple(sorted(self.files.items())), tuple(sorted(self.sha256.items())), self.pad_given)
 
     def __eq__(self, other: object) -> bool:

@@ -38,12 +38,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit, prange
 
 from . import libm
 from .sampling import cell_grid, cell_runs
+
+if TYPE_CHECKING:
+    from .parts import Part
 
 _CHUNK = 1024  # candidates per unit of parallel work
 
@@ -81,7 +85,7 @@ def hold_load(mass_kg: float, accel: float, gravity: float = 9.81) -> float:
     return float(mass_kg) * (float(gravity) + float(accel))
 
 
-def part_mass(part, mass_kg: float | None, density: float | None) -> tuple[float | None, str | None]:
+def part_mass(part: Part, mass_kg: float | None, density: float | None) -> tuple[float | None, str | None]:
     """The part's mass (kg) from `mass_kg` or `density` (kg/m^3) x the volume, and a note when the volume had to be
     taken from the convex hull (an open mesh or a point cloud has no volume of its own)."""
     if mass_kg is not None:
@@ -128,7 +132,18 @@ def torsion_radii(points: np.ndarray, normals: np.ndarray, pad_radius: float, mo
 
 
 @njit(parallel=True, cache=True)
-def _radii_kernel(P, N, cells, cell_start, dims, R, depth, cos_min, rho_min, out):
+def _radii_kernel(
+    P: np.ndarray,
+    N: np.ndarray,
+    cells: np.ndarray,
+    cell_start: np.ndarray,
+    dims: np.ndarray,
+    R: float,
+    depth: float,
+    cos_min: float,
+    rho_min: float,
+    out: np.ndarray,
+) -> None:
     R2 = R * R
     for i in prange(P.shape[0]):
         total = 0.0
@@ -167,15 +182,16 @@ def tilt_factors(contacts: np.ndarray, normals: np.ndarray, friction: float) -> 
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _tilt(ax, ay, az, nx, ny, nz, phi, tan_phi):
+def _tilt(ax: float, ay: float, az: float, nx: float, ny: float, nz: float, phi: float, tan_phi: float) -> float:
     """tilt_factors of one contact: unit closing axis a, surface normal n (any length)."""
     nl = max(np.sqrt(nx * nx + ny * ny + nz * nz), 1e-300)
     cos = min(abs(nx * ax + ny * ay + nz * az) / nl, 1.0)
-    return min(max(np.tan(max(phi - np.arccos(cos), 0.0)) / tan_phi, 0.0), 1.0)
+    factor: float = min(max(np.tan(max(phi - np.arccos(cos), 0.0)) / tan_phi, 0.0), 1.0)
+    return factor
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _tilt_kernel(C, N, mu, out):
+def _tilt_kernel(C: np.ndarray, N: np.ndarray, mu: float, out: np.ndarray) -> None:
     phi = math.atan(mu)
     tan_phi = math.tan(phi)
     for n in prange(C.shape[0]):
@@ -270,7 +286,19 @@ def hold_margins_of_pairs(
     return _margins(pts, nrm, rho, i, j, center_of_mass, load, grip_force, friction, model, floor)
 
 
-def _margins(P, normals, rho, i, j, center_of_mass, load, grip_force, friction, model, floor) -> np.ndarray:
+def _margins(
+    P: np.ndarray,
+    normals: np.ndarray | None,
+    rho: np.ndarray,
+    i: np.ndarray,
+    j: np.ndarray,
+    center_of_mass: np.ndarray,
+    load: float,
+    grip_force: float,
+    friction: float,
+    model: HoldModel,
+    floor: float,
+) -> np.ndarray:
     """The margin kernel over the pairs (P[i], P[j]); normals None: both contacts on the closing axis."""
     com = np.ascontiguousarray(center_of_mass, dtype=np.float64).reshape(3)
     out = np.empty(len(i), dtype=np.float64)
@@ -298,17 +326,29 @@ def _margins(P, normals, rho, i, j, center_of_mass, load, grip_force, friction, 
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _slack(s, a0, a1, b, c0, c1):
+def _slack(s: float, a0: float, a1: float, b: float, c0: float, c1: float) -> float:
     """Torsional capacity left at load scale s (>= 0: held), -1 when a contact's tangential load alone slips."""
     u0 = a0 * s
     u1 = a1 * s
     if u0 > 1.0 or u1 > 1.0:
         return -1.0
-    return c0 * np.sqrt(1.0 - u0 * u0) + c1 * np.sqrt(1.0 - u1 * u1) - b * s
+    slack: float = c0 * np.sqrt(1.0 - u0 * u0) + c1 * np.sqrt(1.0 - u1 * u1) - b * s
+    return slack
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _coeffs(dx, dy, dz, rx, ry, rz, inv_h, w_cap0, w_cap1, W):
+def _coeffs(
+    dx: float,
+    dy: float,
+    dz: float,
+    rx: float,
+    ry: float,
+    rz: float,
+    inv_h: float,
+    w_cap0: float,
+    w_cap1: float,
+    W: float,
+) -> tuple[float, float, float]:
     """In direction d (local frame, x = closing axis), per unit load scale: a0, a1 = each contact's tangential
     load over its friction capacity (w_cap_i = W over contact i's capacity), b = the moment about x (N m)."""
     mx = ry * dz - rz * dy
@@ -323,7 +363,7 @@ def _coeffs(dx, dy, dz, rx, ry, rz, inv_h, w_cap0, w_cap1, W):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _lower(a0, a1, b, c0, c1, inv_c):
+def _lower(a0: float, a1: float, b: float, c0: float, c1: float, inv_c: float) -> float:
     """A lower bound of the direction's limit scale: sqrt(1 - u^2) >= 1 - u makes the slack linear in s, so the
     bound costs no square root. A direction whose bound is not below the running best ends there; for the others
     it is the held end of _limit's bracket, so the margins' last bits depend on it (and so does the first direction
@@ -333,7 +373,7 @@ def _lower(a0, a1, b, c0, c1, inv_c):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _limit(best, lo, a0, a1, b, c0, c1, steps):
+def _limit(best: float, lo: float, a0: float, a1: float, b: float, c0: float, c1: float, steps: int) -> float:
     """min(best, the largest load scale held in the direction with coefficients a0, a1, b; lo = their _lower)."""
     if lo >= best:
         return best
@@ -371,7 +411,9 @@ def _limit(best, lo, a0, a1, b, c0, c1, steps):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _neighbour(bx, by, bz, tangents, ca, sa):
+def _neighbour(
+    bx: float, by: float, bz: float, tangents: tuple[float, float, float, float, float, float], ca: float, sa: float
+) -> tuple[float, float, float]:
     """The unit direction b + ca p + sa q, normalised (tangents = p, q at b): a refinement's neighbour."""
     px, py, pz, qx, qy, qz = tangents
     vx = bx + ca * px + sa * qx
@@ -382,7 +424,23 @@ def _neighbour(bx, by, bz, tangents, ca, sa):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _margins_kernel(P, Nrm, rho, I, J, com, W, mu, cap, dirs, steps, refinements, max_margin, floor, out):
+def _margins_kernel(
+    P: np.ndarray,
+    Nrm: np.ndarray,
+    rho: np.ndarray,
+    I: np.ndarray,
+    J: np.ndarray,
+    com: np.ndarray,
+    W: float,
+    mu: float,
+    cap: float,
+    dirs: np.ndarray,
+    steps: int,
+    refinements: int,
+    max_margin: float,
+    floor: float,
+    out: np.ndarray,
+) -> None:
     K = dirs.shape[0]
     dirsT = np.ascontiguousarray(dirs.T)
     # refinement: around the worst direction, 8 neighbours at 1/2, 1/4, ... of the lattice spacing
@@ -400,7 +458,21 @@ def _margins_kernel(P, Nrm, rho, I, J, com, W, mu, cap, dirs, steps, refinements
 
 
 @njit(cache=True, error_model="numpy")
-def _margin_one(P, Nrm, ia, ib, rho, com, dirs, co, ring_c, ring_s, steps, refinements, run):
+def _margin_one(
+    P: np.ndarray,
+    Nrm: np.ndarray,
+    ia: int,
+    ib: int,
+    rho: np.ndarray,
+    com: np.ndarray,
+    dirs: np.ndarray,
+    co: np.ndarray,
+    ring_c: np.ndarray,
+    ring_s: np.ndarray,
+    steps: int,
+    refinements: int,
+    run: tuple[float, float, float, float, float, float, float, float],
+) -> float:
     """The margin of the candidate (P[ia], P[ib]) with the points' normals Nrm (none: both on the closing axis) and
     torsion radii rho; `dirs` (3, K): the lattice's directions as columns; `co` (4, >= max(K, 8)): work rows of
     a0, a1, b and the lower bound per direction; `run`: the load W, mu F, W / (mu F), max_margin, floor, the

@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 
 __all__ = ["arccos", "arctan2", "cos", "sin"]
@@ -26,7 +27,7 @@ _ACOS, _COS, _SIN, _ATAN2 = 0, 1, 2, 3
 
 
 @njit(cache=True)
-def _apply(op, a, b, out):
+def _apply(op: int, a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
     """out[i] = op(a[i]) (op(a[i], b[i]) for atan2): one kernel, so one cache entry to load."""
     for i in range(out.size):
         if op == _ACOS:
@@ -39,7 +40,7 @@ def _apply(op, a, b, out):
             out[i] = math.atan2(a[i], b[i])
 
 
-def _unary(op: int, x) -> np.ndarray:
+def _unary(op: int, x: npt.ArrayLike) -> np.ndarray:
     a = np.asarray(x, dtype=np.float64)
     out = np.empty(a.shape, dtype=np.float64)
     flat = np.ascontiguousarray(a).reshape(-1)
@@ -47,19 +48,19 @@ def _unary(op: int, x) -> np.ndarray:
     return out
 
 
-def arccos(x) -> np.ndarray:
+def arccos(x: npt.ArrayLike) -> np.ndarray:
     return _unary(_ACOS, x)
 
 
-def cos(x) -> np.ndarray:
+def cos(x: npt.ArrayLike) -> np.ndarray:
     return _unary(_COS, x)
 
 
-def sin(x) -> np.ndarray:
+def sin(x: npt.ArrayLike) -> np.ndarray:
     return _unary(_SIN, x)
 
 
-def arctan2(y, x) -> np.ndarray:
+def arctan2(y: npt.ArrayLike, x: npt.ArrayLike) -> np.ndarray:
     b, a = np.broadcast_arrays(np.asarray(y, dtype=np.float64), np.asarray(x, dtype=np.float64))
     out = np.empty(a.shape, dtype=np.float64)
     _apply(_ATAN2, np.ascontiguousarray(b).reshape(-1), np.ascontiguousarray(a).reshape(-1), out.reshape(-1))

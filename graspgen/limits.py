@@ -18,6 +18,7 @@ import json
 import re
 import struct
 import zipfile
+from typing import Any
 
 import numpy as np
 from numpy.lib import format as npformat
@@ -200,7 +201,10 @@ def _check_glb(data: bytes, label: str, max_bytes: int) -> None:
     # every accessor becomes an array of count x components (trimesh makes zeros for one without a bufferView)
     decoded = 0
     for a in _dicts(tree.get("accessors")):
-        count, comps = a.get("count", 0), _GLTF_COMPONENTS.get(a.get("type"), 16)
+        # the JSON is the sender's: a type, component type or offset of the wrong JSON type (a list is not even
+        # hashable) counts as the largest or as absent, and trimesh refuses the file
+        kind, component, offset = a.get("type"), a.get("componentType"), a.get("byteOffset", 0)
+        count, comps = a.get("count", 0), _GLTF_COMPONENTS.get(kind, 16) if isinstance(kind, str) else 16
         if not isinstance(count, int) or count < 0:
             raise InvalidMeshError(f"{label} has a GLB accessor with an invalid count {count!r}", field="file")
         decoded += 8 * count * comps
@@ -208,8 +212,9 @@ def _check_glb(data: bytes, label: str, max_bytes: int) -> None:
         views = _dicts(tree.get("bufferViews"))
         if isinstance(view, int) and 0 <= view < len(views):
             length = views[view].get("byteLength", 0)
-            item = _GLTF_ITEMSIZE.get(a.get("componentType"), 1) * comps
-            if count and isinstance(length, int) and a.get("byteOffset", 0) + item * count > max(length, 0) + 3:
+            item = (_GLTF_ITEMSIZE.get(component, 1) if isinstance(component, int) else 1) * comps
+            offset = offset if isinstance(offset, int | float) else 0
+            if count and isinstance(length, int) and offset + item * count > max(length, 0) + 3:
                 raise InvalidMeshError(
                     f"{label} has a GLB accessor of {count:,} items that its buffer view ({length:,} bytes) cannot "
                     "hold: the file is truncated or forged",
@@ -229,7 +234,7 @@ def _names(v: object) -> list[str]:
     return [x for x in v if isinstance(x, str)] if isinstance(v, list) else []
 
 
-def _dicts(v: object) -> list[dict]:
+def _dicts(v: object) -> list[dict[str, Any]]:
     return [x for x in v if isinstance(x, dict)] if isinstance(v, list) else []
 
 

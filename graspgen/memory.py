@@ -59,7 +59,9 @@ _BLOCK_PAIRS = 4_000_000
 #: the probe's candidates per point squared are raised by this much: it can under-count by a few per cent
 CANDIDATE_MARGIN = 1.15
 #: the smallest and largest point counts Params accepts
-_MIN_POINTS, _MAX_POINTS = int(param_option(Params, "points").ge), int(param_option(Params, "points").le)
+_POINTS = param_option(Params, "points")
+assert _POINTS.ge is not None and _POINTS.le is not None  # Params declares both bounds of `points`
+_MIN_POINTS, _MAX_POINTS = int(_POINTS.ge), int(_POINTS.le)
 #: the Params fields that change the candidates per point squared; the probe runs with these and the defaults of
 #: the others (points, k1, k2 and seed do not change it; criterion (e) only removes candidates after the collision
 #: stage, so leaving it out over-estimates both phases)

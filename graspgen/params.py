@@ -99,9 +99,14 @@ class ParamOption:
     le: float | None
 
 
-@functools.cache
 def param_options(cls: type) -> tuple[ParamOption, ...]:
     """The declared run parameters of a Params or QualityOptions (or a subclass), in field order."""
+    return _param_options(cls)
+
+
+# behind a typed function: functools.cache takes Hashable arguments, and mypy does not see a `type[Params]` as one
+@functools.cache
+def _param_options(cls: type) -> tuple[ParamOption, ...]:
     hints = get_type_hints(cls)
     out = []
     for f in fields(cls):

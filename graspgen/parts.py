@@ -28,6 +28,7 @@ import re
 import struct
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, cast
 
 import numba
 import numpy as np
@@ -97,7 +98,9 @@ class Part:
         own, the convex hull of its points (what previews draw and the validation simulates)."""
         if self.mesh is not None:
             return self.mesh
-        return trimesh.convex.convex_hull(self.points)
+        assert self.points is not None  # a part is a mesh or a point cloud
+        hull: trimesh.Trimesh = trimesh.convex.convex_hull(self.points)
+        return hull
 
 
 @dataclass(frozen=True)
@@ -113,7 +116,7 @@ class _Raw:
 
 
 def load_part(
-    source: str | os.PathLike | trimesh.Trimesh | bytes,
+    source: str | os.PathLike[str] | trimesh.Trimesh | bytes,
     *,
     units: str,
     name: str | None = None,
@@ -139,7 +142,7 @@ def load_part(
 
 
 def load_solid(
-    source: str | os.PathLike | bytes,
+    source: str | os.PathLike[str] | bytes,
     *,
     units: str,
     file_type: str | None = None,
@@ -223,7 +226,7 @@ def _too_many(label: str, count: int, limit: int) -> str:
 
 
 def read_raw_extents(
-    path: str | os.PathLike | bytes, *, file_type: str | None = None, max_decoded_bytes: int = MAX_DECODED_BYTES
+    path: str | os.PathLike[str] | bytes, *, file_type: str | None = None, max_decoded_bytes: int = MAX_DECODED_BYTES
 ) -> np.ndarray:
     """Axis-aligned extents (3,) float64 in the file's own units, for the CLI's "which unit?" message.
 
@@ -238,7 +241,7 @@ def read_raw_extents(
 
 
 def _read_raw(
-    source: str | os.PathLike | trimesh.Trimesh | bytes,
+    source: str | os.PathLike[str] | trimesh.Trimesh | bytes,
     *,
     file_type: str | None,
     max_decoded_bytes: int,
@@ -302,7 +305,7 @@ def _normalise_type(file_type: str, label: str) -> str:
 def _read_mesh(data: bytes, ft: str, label: str) -> tuple[np.ndarray, np.ndarray]:
     try:
         # materials (textures: PNG/JPEG that PIL would decode) are never used, so never decoded
-        extra = {"skip_materials": True} if ft == "glb" else {}
+        extra: dict[str, Any] = {"skip_materials": True} if ft == "glb" else {}
         loaded = trimesh.load(io.BytesIO(data), file_type=ft, process=False, **extra)
     except ImportError:
         raise  # a broken installation is our problem, not the user's
@@ -453,13 +456,15 @@ def _check_finite(raw: _Raw) -> None:
 def _used_vertices(raw: _Raw) -> np.ndarray:
     if raw.faces is None:
         return raw.vertices
-    return raw.vertices[np.unique(raw.faces)]
+    used: np.ndarray = raw.vertices[np.unique(raw.faces)]
+    return used
 
 
 def _extents(vertices: np.ndarray) -> np.ndarray:
     if len(vertices) == 0:
         return np.zeros(3)
-    return vertices.max(axis=0) - vertices.min(axis=0)
+    extents: np.ndarray = vertices.max(axis=0) - vertices.min(axis=0)
+    return extents
 
 
 def _check_plausible_size(
@@ -517,7 +522,7 @@ def _mesh_part(raw: _Raw, scale: float, name: str, units: str) -> Part:
     else:
         trimesh.repair.fix_winding(mesh)
         warnings.append(_NOT_WATERTIGHT)
-    extents = tuple(float(v) for v in mesh.extents)
+    extents = cast(tuple[float, float, float], tuple(float(v) for v in mesh.extents))
     return Part(name, mesh, None, None, units, raw.sha256, watertight, extents, tuple(warnings))
 
 
@@ -563,7 +568,8 @@ def _clean_faces(faces: np.ndarray) -> np.ndarray:
     # the same vertex set wound the other way: (a, b, c) vs (a, c, b) -> both enclose nothing together
     key = np.sort(canon, axis=1)
     _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    return faces[counts[inverse.ravel()] == 1]
+    kept: np.ndarray = faces[counts[inverse.ravel()] == 1]
+    return kept
 
 
 # ----------------------------------------------------------------------------------------------- point clouds
@@ -604,7 +610,7 @@ def _point_cloud_part(raw: _Raw, scale: float, name: str, units: str) -> Part:
     normals = np.ascontiguousarray(normals, dtype=np.float64)
     points.setflags(write=False)
     normals.setflags(write=False)
-    extents = tuple(float(v) for v in _extents(points))
+    extents = cast(tuple[float, float, float], tuple(float(v) for v in _extents(points)))
     return Part(name, None, points, normals, units, raw.sha256, False, extents, tuple(warnings))
 
 
@@ -613,7 +619,8 @@ def estimate_normals(points: np.ndarray, *, k: int = _NORMAL_NEIGHBOURS) -> np.n
     n = len(points)
     k = min(k, n)
     tree = cKDTree(points)
-    dist, nbr = tree.query(points, k=k)
+    # scipy-stubs type query's result as scalars or arrays; with points (n, 3) it is arrays
+    dist, nbr = cast(tuple[np.ndarray, np.ndarray], tree.query(points, k=k))
     normals = np.empty_like(points)
     chunk = 65536
     for start in range(0, n, chunk):

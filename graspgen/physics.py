@@ -56,12 +56,13 @@ import math
 import os
 import threading
 from collections import OrderedDict
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field, replace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
+import numpy.typing as npt
 import trimesh
 
 from .errors import InvalidParameterError
@@ -293,7 +294,7 @@ def validation_set(friction: float) -> tuple[Perturbation, ...]:
     )
 
 
-def first_failures(grid: list[list[SimResult]], members) -> list[SimResult]:
+def first_failures(grid: list[list[SimResult]], members: Sequence[Perturbation]) -> list[SimResult]:
     """One outcome per grasp of simulate_perturbed's `grid` under `members` (validation_set): the first member's
     (the nominal) result when the grasp held in all of them, else the result of the first member it failed, named
     in `SimResult.member`."""
@@ -354,11 +355,11 @@ class SimPart:
     grip_force: float = 0.0  # N per finger
     inertia: np.ndarray | None = None  # (3, 3) about the centre of mass, kg m^2
     #: the convex pieces, kept to build the models of perturbations (another mass or friction)
-    hulls: list = field(default_factory=list, repr=False)
+    hulls: list[trimesh.Trimesh] = field(default_factory=list, repr=False)
     #: dense samples (object frame) of the part's own surface when the pieces are larger than the part (CoACD, in
     #: its concavities): an approach that meets a piece collides only if the gripper's path meets this surface
     surface_points: np.ndarray | None = field(default=None, repr=False)
-    _variants: dict = field(default_factory=dict, repr=False, compare=False)
+    _variants: dict[tuple[float, float, bool, bool], Any] = field(default_factory=dict, repr=False, compare=False)
     _lock: Any = field(default_factory=threading.Lock, repr=False, compare=False)
     _surface_tree: Any = field(default=None, repr=False, compare=False)
     #: the part's mesh and the seed of its decomposition, to build a finer one (refined)
@@ -379,6 +380,7 @@ class SimPart:
             return None
         with self._lock:
             if self._refined is None:
+                assert self.inertia is not None  # _assemble sets it
                 finer = replace(c, coacd_threshold=c.coacd_threshold / 2, coacd_max_hulls=2 * c.coacd_max_hulls)
                 part = _assemble(
                     self.mesh,
@@ -409,7 +411,8 @@ class SimPart:
                 from scipy.spatial import cKDTree
 
                 self._surface_tree = cKDTree(self.surface_points)
-        return self._surface_tree.query(points)[0]
+        distance: np.ndarray = self._surface_tree.query(points)[0]
+        return distance
 
     def describe(self) -> dict[str, Any]:
         out = {
@@ -442,6 +445,7 @@ class SimPart:
             if key not in self._variants:
                 import mujoco
 
+                assert self.inertia is not None  # _assemble sets it
                 xml = _xml(
                     self.hulls,
                     self.spec,
@@ -464,7 +468,7 @@ class SimPart:
 
 #: decompositions kept per process (CoACD takes seconds to a minute a part; a worker validates the same object for
 #: several grippers and jobs): key -> (pieces, method, note), the pieces read-only
-_DECOMPOSITIONS: OrderedDict = OrderedDict()
+_DECOMPOSITIONS: OrderedDict[tuple[object, ...], tuple[list[trimesh.Trimesh], str, str | None]] = OrderedDict()
 _DECOMPOSITIONS_KEPT = 8
 _DECOMPOSITIONS_LOCK = threading.Lock()
 
@@ -496,7 +500,7 @@ def _decompose_once(mesh: trimesh.Trimesh, c: SimConstants, seed: int) -> tuple[
         return [mesh.convex_hull], "convex-hull", "coacd is not installed: the part is simulated as its convex hull"
     coacd.set_log_level("error")
 
-    def run(preprocess: str):
+    def run(preprocess: str) -> Any:  # coacd is untyped: its (vertices, faces) pieces
         return coacd.run_coacd(
             coacd.Mesh(np.asarray(mesh.vertices), np.asarray(mesh.faces)),
             threshold=c.coacd_threshold,
@@ -650,21 +654,22 @@ def _mass_properties(
     com = np.asarray(props["center_mass"], dtype=np.float64)
     if mass_kg is not None:
         density = mass_kg / volume
+    assert density is not None  # prepare_part requires mass_kg or density
     inertia = np.asarray(props["inertia"], dtype=np.float64) * density  # trimesh's is for unit density
     return volume * density, com, inertia, note
 
 
-def _fmt(values) -> str:
+def _fmt(values: npt.ArrayLike) -> str:
     return " ".join(f"{float(v):.9g}" for v in np.asarray(values).ravel())
 
 
 def _xml(
-    pieces,
+    pieces: list[trimesh.Trimesh],
     spec: GripperSpec,
     friction: float,
     mass: float,
-    com,
-    inertia,
+    com: np.ndarray,
+    inertia: np.ndarray,
     c: SimConstants,
     grip_force: float,
     *,
@@ -785,7 +790,7 @@ def prepare_part(
     (kg/m^3): exactly one is required. The grip force (N per finger) is `grip_force`, else the gripper's
     `grip_force`; without either the validation is refused. InvalidParameterError on a missing or bad value."""
 
-    def positive(v) -> bool:
+    def positive(v: object) -> bool:
         return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0
 
     if mass_kg is None and density is None:
@@ -816,7 +821,7 @@ def _assemble(
     mesh: trimesh.Trimesh,
     spec: GripperSpec,
     mu: float,
-    mass_properties: tuple,
+    mass_properties: tuple[float, np.ndarray, np.ndarray],
     force: float,
     constants: SimConstants,
     seed: int,
@@ -873,7 +878,8 @@ def _matrix_to_quat_wxyz(R: np.ndarray) -> np.ndarray:
 
 
 def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
-    return trimesh.transformations.rotation_matrix(angle, axis)[:3, :3]
+    R: np.ndarray = trimesh.transformations.rotation_matrix(angle, axis)[:3, :3]
+    return R
 
 
 class _Grasp:
@@ -1080,7 +1086,7 @@ class _Grasp:
             return SimResult(False, "slipped", slip * 1e3, rot, contacts, bearing_gap_mm=gap, refinements=refined)
         return SimResult(True, None, slip * 1e3, rot, contacts, bearing_gap_mm=gap, refinements=refined)
 
-    def _loads(self, dt: float):
+    def _loads(self, dt: float) -> Iterator[np.ndarray]:
         """Acceleration felt by the part (gravity minus the gripper's acceleration), grasp frame, per interval."""
         c, p = self.c, self.p
         g = np.array([0.0, 0.0, c.gravity])
@@ -1151,7 +1157,7 @@ def simulate_perturbed(
     sim: SimPart,
     poses: np.ndarray,
     widths: np.ndarray,
-    perturbations,
+    perturbations: Iterable[Perturbation],
     *,
     seed: int = 0,
     keys: np.ndarray | None = None,
@@ -1201,7 +1207,17 @@ def simulate_perturbed(
         sim = finer
 
 
-def _simulate_all(sim, poses, widths, members, seed, keys, workers, inside, step) -> list[list[SimResult]]:
+def _simulate_all(
+    sim: SimPart,
+    poses: np.ndarray,
+    widths: np.ndarray,
+    members: list[Perturbation],
+    seed: int,
+    keys: np.ndarray,
+    workers: int | None,
+    inside: np.ndarray,
+    step: Callable[[int], None],
+) -> list[list[SimResult]]:
     """simulate_perturbed on one geometry: every grasp under every member, in one thread pool; step(k) after the
     k-th simulation ends (in the calling thread)."""
     n = len(poses)
@@ -1233,7 +1249,8 @@ def _simulate_all(sim, poses, widths, members, seed, keys, workers, inside, step
                     fut.cancel()
                 raise
     m = len(members)
-    return [flat[i * m : (i + 1) * m] for i in range(n)]
+    results = cast(list[SimResult], flat)  # every job has its result: each one ended or the pool raised
+    return [results[i * m : (i + 1) * m] for i in range(n)]
 
 
 def summarise(results: list[SimResult]) -> dict[str, Any]:

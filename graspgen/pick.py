@@ -147,6 +147,7 @@ class PickIndex:
 
     @property
     def nbytes(self) -> int:
+        arrays: tuple[np.ndarray, ...]
         arrays = (self.candidate, self.roll_index, self.frames, self.approach, self.width, self.score, self.rank)
         arrays = (*arrays, self.by_rank)
         extra = 0 if self.hold_margin is None else self.hold_margin.nbytes
@@ -358,7 +359,7 @@ _PREFILTER_SLACK = 1e-5
 
 def _dot(rows: np.ndarray, v: np.ndarray) -> np.ndarray:
     """rows (3, k) . v (3,) -> (k,), as multiply-adds (no BLAS)."""
-    out = rows[0] * v[0]
+    out: np.ndarray = rows[0] * v[0]
     out += rows[1] * v[1]
     out += rows[2] * v[2]
     return out

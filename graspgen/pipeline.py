@@ -8,7 +8,7 @@ import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import trimesh
@@ -23,6 +23,9 @@ from .gripper import GripperSpec
 from .params import TOLERANCES, Params, QualityOptions, from_keywords, keyword_parameters
 from .parts import Part, load_part
 from .transforms import grasp_frames, roll_angles_rad
+
+if TYPE_CHECKING:
+    from .physics import SimResult
 
 __all__ = ["generate", "recluster", "STAGES", "MAX_CANDIDATES", "choose_roll"]
 
@@ -57,7 +60,7 @@ def _signature_with_fields(func: Callable[..., Any], *classes: type) -> inspect.
 
 
 def generate(
-    mesh_or_path: str | os.PathLike | trimesh.Trimesh | Part,
+    mesh_or_path: str | os.PathLike[str] | trimesh.Trimesh | Part,
     gripper: GripperSpec | dict[str, Any],
     *,
     units: str | None = None,
@@ -122,7 +125,7 @@ def generate(
     return result
 
 
-generate.__signature__ = _signature_with_fields(generate, Params, QualityOptions)  # type: ignore[attr-defined]
+generate.__signature__ = _signature_with_fields(generate, Params, QualityOptions)  # type: ignore[attr-defined]  # inspect reads it; mypy does not model function attributes
 
 # --------------------------------------------------------------------------------------------------------------------
 # the stages of generate(), each a function of the run and the earlier stages' results
@@ -221,7 +224,7 @@ class _MeshChecked:
 
 
 def _load(
-    run: _Run, mesh_or_path: str | os.PathLike | trimesh.Trimesh | Part, units: str | None, object_name: str | None
+    run: _Run, mesh_or_path: str | os.PathLike[str] | trimesh.Trimesh | Part, units: str | None, object_name: str | None
 ) -> _Loaded:
     run.report("load", 0.0)
     t0 = time.perf_counter()
@@ -342,11 +345,12 @@ def _hold_part(run: _Run, loaded: _Loaded, surface: _Surface, survivors: _Surviv
     load = diagnosis = None
     removed = 0
     if active:
+        assert loaded.mass_kg is not None and spec.grip_force is not None  # _hold_active checked both
         pts, s = surface.points, survivors
         rho = _hold.torsion_radii(pts, surface.normals, _patch_radius(spec))
         load = _hold.hold_load(loaded.mass_kg, params.accel)
         pair = (pts, surface.normals, rho, s.i, s.j, com)
-        hold_args = dict(load=load, grip_force=spec.grip_force, friction=run.mu)
+        hold_args: dict[str, Any] = dict(load=load, grip_force=spec.grip_force, friction=run.mu)
         margins = _hold.hold_margins_of_pairs(*pair, floor=1.0, **hold_args)
         keep = margins >= 1.0
         removed = int(np.sum(~keep))
@@ -454,7 +458,7 @@ def _stats(
             "grip_force": run.spec.grip_force,
             "friction": run.mu,
             "center_of_mass": [float(v) for v in loaded.center_of_mass],
-            "min_margin": float(np.min(cands.hold_margin)) if len(cands) else None,
+            "min_margin": float(np.min(cands.hold_margin)) if len(cands) and cands.hold_margin is not None else None,
         }
     for note in (held.warning, loaded.mass_note):
         if note:
@@ -466,7 +470,9 @@ def _stats(
     return stats
 
 
-def _normal_spread(tree, pts, nrm, tolerance: float) -> np.ndarray | None:
+def _normal_spread(
+    tree: _collision.MeshTree | None, pts: np.ndarray, nrm: np.ndarray, tolerance: float
+) -> np.ndarray | None:
     """Per sample point, the largest angle (rad) between its normal and a surface normal within `tolerance`: of
     the mesh's triangles, or for a point cloud of the other sample points; None when nothing is near."""
     if tolerance <= 0 or len(pts) == 0:
@@ -516,6 +522,7 @@ def _hold_active(params: Params, spec: GripperSpec, mass: float | None) -> tuple
 
 def _hold_diagnosis(best: float, spec: GripperSpec, mass: float, params: Params) -> dict[str, Any]:
     """What would make the best candidate hold: the margin scales with the grip force over the load."""
+    assert spec.grip_force is not None  # criterion (e) runs only with a grip force
     need_force = spec.grip_force / best if best > 0 else math.inf
     max_mass = mass * best
     return {
@@ -531,7 +538,7 @@ def _hold_diagnosis(best: float, spec: GripperSpec, mass: float, params: Params)
 
 
 def recluster(
-    candidates: str | os.PathLike | Candidates,
+    candidates: str | os.PathLike[str] | Candidates,
     previous_export: dict[str, Any],
     *,
     k1: int,
@@ -541,7 +548,7 @@ def recluster(
     progress: Progress | None = None,
     mass_kg: float | None = None,
     density: float | None = None,
-    mesh: str | os.PathLike | trimesh.Trimesh | Part | None = None,
+    mesh: str | os.PathLike[str] | trimesh.Trimesh | Part | None = None,
     units: str | None = None,
     gripper: GripperSpec | None = None,
     options: QualityOptions | None = None,
@@ -596,6 +603,7 @@ def recluster(
         _check_validation_inputs(run_mass, spec)
     surface = None
     if options.select != "medoid" and cands.quality_terms is None:
+        assert part is not None  # refused above without the part
         surface = _surface_for_quality(part, params)
         cands = _with_quality(cands, part, *surface, spec, mu, params)
     extras = _Extras(options, part, run_mass, surface)
@@ -609,10 +617,21 @@ def recluster(
     return result
 
 
-recluster.__signature__ = _signature_with_fields(recluster, QualityOptions)  # type: ignore[attr-defined]
+recluster.__signature__ = _signature_with_fields(recluster, QualityOptions)  # type: ignore[attr-defined]  # inspect reads it; mypy does not model function attributes
 
 
-def _cluster_and_export(cands, obj, spec, params, mu, stats, report, t_all, warnings, extras=None) -> GraspSet:
+def _cluster_and_export(
+    cands: Candidates,
+    obj: dict[str, Any],
+    spec: GripperSpec,
+    params: Params,
+    mu: float,
+    stats: dict[str, Any],
+    report: Progress,
+    t_all: float,
+    warnings: list[str],
+    extras: _Extras | None = None,
+) -> GraspSet:
     extras = extras or _Extras()
     report("cluster", 0.0)
     t0 = time.perf_counter()
@@ -630,6 +649,7 @@ def _cluster_and_export(cands, obj, spec, params, mu, stats, report, t_all, warn
     medoid_of = medoids.copy()
     score = None
     if extras.options.select != "medoid":
+        assert cands.quality_terms is not None  # generate scores every run; recluster scored them above
         score = quality.scores(cands.quality_terms)
         medoids = quality.select_best_near_medoid(labels, medoids, clusters, score, cands.midpoints, cands.axes)
         stats["selection"] = {
@@ -724,10 +744,11 @@ def choose_roll(free: np.ndarray) -> int:
                 best = key
         else:
             k += 1
+    assert best is not None  # some roll is free
     return int(best[2])
 
 
-def _grasps(cands: Candidates, medoids, clusters, sizes) -> list[dict[str, Any]]:
+def _grasps(cands: Candidates, medoids: np.ndarray, clusters: np.ndarray, sizes: np.ndarray) -> list[dict[str, Any]]:
     if len(medoids) == 0:
         return []
     rolls = np.array([choose_roll(cands.free_rolls[m]) for m in medoids], dtype=np.int64)
@@ -755,12 +776,15 @@ def _grasps(cands: Candidates, medoids, clusters, sizes) -> list[dict[str, Any]]
     return out
 
 
-def _seat_grasps(grasps: list[dict[str, Any]], spec: GripperSpec, part: Part, mu: float, params: Params) -> dict:
+def _seat_grasps(
+    grasps: list[dict[str, Any]], spec: GripperSpec, part: Part, mu: float, params: Params
+) -> dict[str, int]:
     """Fingers from CAD close until they touch (CONTRACT.md): each exported grasp's `width`, `contacts`, `normals`
     and `friction_margin_deg` become the seat's (graspgen.collision.seat_fingers, from the contact end of the fingers'
     travel that criterion (d) cleared): `contacts` holds, per finger, its contact nearest the finger's closing line,
     `finger_contacts` and `finger_normals` all of them (a V-groove's two flanks); the pose stays the candidate's (the
     gripper's body was checked there). Returns the counts for stats."""
+    assert part.mesh is not None
     tree = _collision.build_tree(part.mesh.vertices, part.mesh.faces)
     solids = spec.solids()
     half = quality.half_angle_deg(mu, params.safety_factor)
@@ -773,7 +797,8 @@ def _seat_grasps(grasps: list[dict[str, Any]], spec: GripperSpec, part: Part, mu
             unseated += 1
             continue
         x, o = T[:3, 0], T[:3, 3]
-        contacts, normals = [], []
+        contacts: list[list[float]] = []
+        normals: list[list[float]] = []
         for k in range(2):
             pts = seat.points[k]
             off = (pts - o) - np.outer((pts - o) @ x, x)  # distance from the closing line through the origin
@@ -789,7 +814,16 @@ def _seat_grasps(grasps: list[dict[str, Any]], spec: GripperSpec, part: Part, mu
     return {"grasps": len(grasps) - unseated, "unseated": unseated}
 
 
-def _empty_reason(rejected, total, spec: GripperSpec, params: Params, mu: float, pts, nrm, hold_diag=None) -> dict:
+def _empty_reason(
+    rejected: dict[str, int],
+    total: int,
+    spec: GripperSpec,
+    params: Params,
+    mu: float,
+    pts: np.ndarray,
+    nrm: np.ndarray,
+    hold_diag: dict[str, Any] | None = None,
+) -> dict[str, Any]:
     """Which criterion removed the last pairs, and what to change.
 
     Pairs on one face or adjacent faces fail (b) or (c) whatever the stroke, so when (b) or (c) removed the last
@@ -841,7 +875,7 @@ def _empty_reason(rejected, total, spec: GripperSpec, params: Params, mu: float,
             "fingers, a smaller pregrasp_clearance, collision mode 'paper', or more rolls"
         ),
     }
-    out = {"criterion": criterion, "message": hints[criterion]}
+    out: dict[str, Any] = {"criterion": criterion, "message": hints[criterion]}
     if narrowest is not None:
         out["narrowest_antipodal_width"] = narrowest
     return out
@@ -871,14 +905,26 @@ def _surface_for_quality(part: Part, params: Params) -> tuple[np.ndarray, np.nda
     return sample.points, sample.normals
 
 
-def _with_quality(cands: Candidates, part: Part, pts, nrm, spec: GripperSpec, mu: float, params: Params) -> Candidates:
+def _with_quality(
+    cands: Candidates, part: Part, pts: np.ndarray, nrm: np.ndarray, spec: GripperSpec, mu: float, params: Params
+) -> Candidates:
     """The candidates with their quality terms (quality.py) and the part's centre of mass."""
     com = quality.center_of_mass(part.mesh, part.points)
     terms = _quality_terms(cands, np.arange(len(cands)), part, com, pts, nrm, spec, mu, params)
     return replace(cands, quality_terms=terms, center_of_mass=com)
 
 
-def _quality_terms(cands: Candidates, idx, part: Part, com, pts, nrm, spec: GripperSpec, mu: float, params: Params):
+def _quality_terms(
+    cands: Candidates,
+    idx: np.ndarray,
+    part: Part,
+    com: np.ndarray,
+    pts: np.ndarray,
+    nrm: np.ndarray,
+    spec: GripperSpec,
+    mu: float,
+    params: Params,
+) -> np.ndarray:
     """Quality terms (len(idx), 3) of candidates `idx`; a row depends on its own candidate only."""
     return quality.quality_terms(
         cands.contacts[idx],
@@ -922,11 +968,14 @@ def _check_geometry_part(spec: GripperSpec, part: Part) -> None:
         )
 
 
-def _export_terms(cands: Candidates, idx, extras: _Extras, spec: GripperSpec, mu: float, params: Params):
+def _export_terms(
+    cands: Candidates, idx: np.ndarray, extras: _Extras, spec: GripperSpec, mu: float, params: Params
+) -> np.ndarray | None:
     """Quality terms of the exported grasps `idx`, to order the export: from the candidates when they were
     scored, else computed for these few grasps (cheap); None without the part (recluster without `mesh`)."""
     if cands.quality_terms is not None:
-        return cands.quality_terms[idx]
+        stored: np.ndarray = cands.quality_terms[idx]
+        return stored
     if extras.part is None:
         return None
     pts, nrm = extras.surface if extras.surface is not None else _surface_for_quality(extras.part, params)
@@ -940,7 +989,18 @@ def _poses(cands: Candidates, idx: np.ndarray) -> np.ndarray:
     return grasp_frames(cands.midpoints[idx], cands.axes[idx], cands.roll_angles_rad[rolls])
 
 
-def _validate(cands, labels, selected, clusters, spec, mu, params, extras: _Extras, stats, report):
+def _validate(
+    cands: Candidates,
+    labels: np.ndarray,
+    selected: np.ndarray,
+    clusters: np.ndarray,
+    spec: GripperSpec,
+    mu: float,
+    params: Params,
+    extras: _Extras,
+    stats: dict[str, Any],
+    report: Progress,
+) -> tuple[np.ndarray, list[SimResult]]:
     """Simulate the selected grasps under every member of physics.validation_set: a grasp passes when it holds in
     all of them. Replace each failing one by the first of up to `repair_limit` members of its final cluster (nearest
     to it first) that passes. Returns the new selection and its SimResults (physics.first_failures)."""
@@ -948,6 +1008,7 @@ def _validate(cands, labels, selected, clusters, spec, mu, params, extras: _Extr
 
     report("validate", 0.0)
     part = extras.part
+    assert part is not None  # validation is refused without the part
     note = None
     if part.is_point_cloud:
         note = "a point cloud has no surface to simulate: simulated as the convex hull of its points"
@@ -957,7 +1018,7 @@ def _validate(cands, labels, selected, clusters, spec, mu, params, extras: _Extr
     checks = physics.validation_set(mu)
     limit = extras.options.repair_limit
 
-    def run(idx: np.ndarray, lo: float, hi: float) -> list:
+    def run(idx: np.ndarray, lo: float, hi: float) -> list[SimResult]:
         """The first failure (or the success) of each grasp idx; progress runs from lo to hi meanwhile (each
         simulation reports, so a cancel or the time limit stops the stage within one simulation)."""
         sims = physics.simulate_perturbed(

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba import njit, prange
@@ -34,6 +34,9 @@ from scipy.spatial import cKDTree
 from . import libm
 from .params import SELECT_MODES
 from .sampling import cell_grid, cell_runs
+
+if TYPE_CHECKING:
+    import trimesh
 
 __all__ = [
     "TERMS",
@@ -83,14 +86,15 @@ class Near:
 NEAR = Near()
 
 
-def center_of_mass(mesh=None, points: np.ndarray | None = None) -> np.ndarray:
+def center_of_mass(mesh: trimesh.Trimesh | None = None, points: np.ndarray | None = None) -> np.ndarray:
     """Centre of mass (3,) metres: the volume centroid of a closed mesh, else the area / point centroid."""
     if mesh is not None:
         if mesh.is_watertight and mesh.volume > 0:
             return np.asarray(mesh.center_mass, dtype=np.float64)
         areas = mesh.area_faces
         return np.asarray((mesh.triangles_center * areas[:, None]).sum(axis=0) / areas.sum(), dtype=np.float64)
-    return np.asarray(points, dtype=np.float64).reshape(-1, 3).mean(axis=0)
+    centroid: np.ndarray = np.asarray(points, dtype=np.float64).reshape(-1, 3).mean(axis=0)
+    return centroid
 
 
 def quality_terms(
@@ -127,6 +131,10 @@ def quality_terms(
     if flatness is not None:
         out[:, 2] = np.asarray(flatness, dtype=np.float64).reshape(n, 2).min(axis=1)
     else:
+        if surface_points is None or surface_normals is None or patch_radius is None:
+            raise ValueError(
+                "quality_terms needs `flatness`, or `surface_points`, `surface_normals` and `patch_radius`"
+            )
         out[:, 2] = np.minimum(
             *(
                 _patch_flatness(contacts[:, k], normals[:, k], surface_points, surface_normals, patch_radius)
@@ -154,7 +162,15 @@ def point_flatness(points: np.ndarray, normals: np.ndarray, radius: float) -> np
 
 
 @njit(parallel=True, cache=True)
-def _flatness_kernel(P, N, cells, cell_start, dims, r2, out):
+def _flatness_kernel(
+    P: np.ndarray,
+    N: np.ndarray,
+    cells: np.ndarray,
+    cell_start: np.ndarray,
+    dims: np.ndarray,
+    r2: float,
+    out: np.ndarray,
+) -> None:
     for i in prange(P.shape[0]):
         total = 0.0
         count = 0
@@ -191,7 +207,8 @@ def _patch_flatness(c: np.ndarray, nc: np.ndarray, pts: np.ndarray, nrm: np.ndar
 
 def scores(terms: np.ndarray, weights: QualityWeights = WEIGHTS) -> np.ndarray:
     """The weighted score (n,) in [0, 1] from terms (n, 3)."""
-    return np.asarray(terms, dtype=np.float64).reshape(-1, 3) @ weights.vector()
+    score: np.ndarray = np.asarray(terms, dtype=np.float64).reshape(-1, 3) @ weights.vector()
+    return score
 
 
 def members_by_distance(

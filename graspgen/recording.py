@@ -38,7 +38,7 @@ def cluster_colours(labels: np.ndarray) -> np.ndarray:
 
 
 def record_run(
-    target: str | os.PathLike | rr.RecordingStream,
+    target: str | os.PathLike[str] | rr.RecordingStream,
     result: GraspSet,
     *,
     sample_points: np.ndarray | None,
@@ -72,7 +72,7 @@ def record_run(
 SIM_COLOURS = {True: (40, 180, 70), False: (220, 40, 40)}
 
 
-def _log_validation(stream, result) -> None:
+def _log_validation(stream: rr.RecordingStream, result: GraspSet) -> None:
     """The simulated outcome per grasp: its gripper boxes green (held) or red (failed, labelled with the reason)."""
     import rerun as rr
 
@@ -103,7 +103,7 @@ def _log_validation(stream, result) -> None:
     )
 
 
-def _log_coverage(stream, stats) -> None:
+def _log_coverage(stream: rr.RecordingStream, stats: dict[str, Any]) -> None:
     """Coverage and diversity figures as a small table."""
     import rerun as rr
 
@@ -125,7 +125,13 @@ def _log_coverage(stream, stats) -> None:
     stream.log("stats/coverage", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN), static=True)
 
 
-def _log(stream, result, points, normals, extra) -> None:
+def _log(
+    stream: rr.RecordingStream,
+    result: GraspSet,
+    points: np.ndarray | None,
+    normals: np.ndarray | None,
+    extra: dict[str, Any] | None,
+) -> None:
     import rerun as rr
 
     stream.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import io
 import math
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
@@ -28,6 +29,9 @@ VIEWS: tuple[tuple[str, tuple[float, float, float], tuple[float, float, float]],
     ("side", (1.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
     ("top", (0.0, 0.0, 1.0), (0.0, 1.0, 0.0)),
 )
+#: a view of VIEWS; a layer of triangles: vertices (v, 3), faces (f, 3), colours (f, 3)
+_View = tuple[str, tuple[float, float, float], tuple[float, float, float]]
+_Layer = tuple[np.ndarray, np.ndarray, np.ndarray]
 #: (width, height) in pixels
 DEFAULT_SIZE = (800, 600)
 #: the largest image side accepted (pixels)
@@ -49,7 +53,9 @@ _HIDDEN_ALPHA = 0.12
 
 
 @njit(cache=True, nogil=True)
-def _raster(xy, depth_v, faces, colours, zbuf, img):
+def _raster(
+    xy: np.ndarray, depth_v: np.ndarray, faces: np.ndarray, colours: np.ndarray, zbuf: np.ndarray, img: np.ndarray
+) -> None:
     """Rasterise triangles (vertex screen coords xy (n, 2), depth (n,), faces (m, 3), colours (m, 3)) into the
     z-buffer zbuf (H, W) and image img (H, W, 3); smaller depth is nearer."""
     H, W = zbuf.shape
@@ -86,7 +92,8 @@ def _raster(xy, depth_v, faces, colours, zbuf, img):
 def gripper_triangles(spec: GripperSpec, T_object_grasp: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
     """Vertices (v, 3) and faces (f, 3) of the gripper's solids (fingers at `width`, palm or body: boxes, or the
     meshes of a gripper from CAD) in the object frame."""
-    verts, faces = [], []
+    verts: list[np.ndarray] = []
+    faces: list[np.ndarray] = []
     solids = spec.solids()
     if solids.meshes is not None:
         for m in solids.trimeshes(width):
@@ -102,7 +109,7 @@ def gripper_triangles(spec: GripperSpec, T_object_grasp: np.ndarray, width: floa
     return np.vstack(verts), np.vstack(faces).astype(np.int64)
 
 
-def _layers(mesh: trimesh.Trimesh, export: dict[str, Any], gripper: GripperSpec | None = None):
+def _layers(mesh: trimesh.Trimesh, export: dict[str, Any], gripper: GripperSpec | None = None) -> tuple[_Layer, _Layer]:
     """Two layers of triangles, the part and the grippers: each (vertices (v, 3), faces (f, 3), colours (f, 3))."""
     part = (
         np.asarray(mesh.vertices, dtype=np.float64),
@@ -124,7 +131,7 @@ def _layers(mesh: trimesh.Trimesh, export: dict[str, Any], gripper: GripperSpec 
     return part, (np.vstack(verts), np.vstack(faces), np.vstack(cols))
 
 
-def _tile(part, grippers, centre, radius, view, w, h) -> np.ndarray:
+def _tile(part: _Layer, grippers: _Layer, centre: np.ndarray, radius: float, view: _View, w: int, h: int) -> np.ndarray:
     """One view as (h, w, 3) float in 0..1: the part, and the grippers over it, see-through where in front."""
     W, H = w * _SUPERSAMPLE, h * _SUPERSAMPLE
     zp, ip = _layer(*part, centre, radius, view, W, H)
@@ -134,10 +141,20 @@ def _tile(part, grippers, centre, radius, view, w, h) -> np.ndarray:
     img[front] = _GRIPPER_ALPHA * ig[front] + (1.0 - _GRIPPER_ALPHA) * ip[front]
     behind = np.isfinite(zg) & ~front
     img[behind] = _HIDDEN_ALPHA * ig[behind] + (1.0 - _HIDDEN_ALPHA) * ip[behind]
-    return img.reshape(h, _SUPERSAMPLE, w, _SUPERSAMPLE, 3).mean(axis=(1, 3))
+    tile: np.ndarray = img.reshape(h, _SUPERSAMPLE, w, _SUPERSAMPLE, 3).mean(axis=(1, 3))
+    return tile
 
 
-def _layer(verts, faces, base, centre, radius, view, W, H) -> tuple[np.ndarray, np.ndarray]:
+def _layer(
+    verts: np.ndarray,
+    faces: np.ndarray,
+    base: np.ndarray,
+    centre: np.ndarray,
+    radius: float,
+    view: _View,
+    W: int,
+    H: int,
+) -> tuple[np.ndarray, np.ndarray]:
     """Depth (H, W) (inf where empty) and outlined, shaded colour (H, W, 3) of one layer of triangles."""
     _, towards_camera, up_hint = view
     back = np.asarray(towards_camera, dtype=np.float64)
@@ -230,7 +247,7 @@ def render_grasp_set(
     return buf.getvalue()
 
 
-def _check_size(size) -> tuple[int, int]:
+def _check_size(size: Iterable[Any]) -> tuple[int, int]:
     from .errors import InvalidParameterError
 
     try:

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import cast
 
 import numba
 import numpy as np
@@ -93,7 +94,8 @@ def spacing_stats(points: np.ndarray) -> tuple[float, float]:
     """(mean, minimum) nearest-neighbour distance of `points` (n, 3); (0, 0) for fewer than two points."""
     if len(points) < 2:
         return 0.0, 0.0
-    d, _ = cKDTree(points).query(points, k=2)
+    # scipy-stubs type query's result as scalars or arrays; with points (n, 3) it is arrays
+    d, _ = cast(tuple[np.ndarray, np.ndarray], cKDTree(points).query(points, k=2))
     return float(d[:, 1].mean()), float(d[:, 1].min())
 
 
@@ -109,6 +111,7 @@ def morton_order(points: np.ndarray) -> np.ndarray:
 
 def _mesh_candidates(part: Part, m: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, float]:
     mesh = part.mesh
+    assert mesh is not None  # sample_surface calls this for meshes only
     areas = np.asarray(mesh.area_faces, dtype=np.float64)
     cum = np.cumsum(areas)
     total = float(cum[-1])
@@ -126,7 +129,7 @@ def _mesh_candidates(part: Part, m: int, rng: np.random.Generator) -> tuple[np.n
 def _cloud_area(points: np.ndarray, k: int = 8) -> float:
     """Surface area a cloud covers, from its local density: median over points of pi r_k^2 / (k - 1), times n."""
     k = min(k, len(points))
-    d, _ = cKDTree(points).query(points, k=k)
+    d, _ = cast(tuple[np.ndarray, np.ndarray], cKDTree(points).query(points, k=k))
     r = d[:, -1]
     per_point = np.median(np.pi * r * r / max(k - 1, 1))
     return float(per_point * len(points))
@@ -164,7 +167,7 @@ def _eliminate_to(points: np.ndarray, normals: np.ndarray, count: int, area: flo
 
 
 @numba.njit(cache=True)
-def _morton_code(q):
+def _morton_code(q: np.ndarray) -> np.ndarray:
     """Morton codes (n,) uint64 of non-negative integer coordinates q (n, 3) below 2^21."""
     out = np.empty(q.shape[0], dtype=np.uint64)
     for i in range(q.shape[0]):
@@ -173,13 +176,13 @@ def _morton_code(q):
 
 
 @numba.njit(cache=True)
-def _morton1(x, y, z):
+def _morton1(x: int, y: int, z: int) -> np.uint64:
     """The Morton code (uint64) of one cell (x, y, z): their low 21 bits interleaved, x lowest."""
     return _spread1(x) | (_spread1(y) << np.uint64(1)) | (_spread1(z) << np.uint64(2))
 
 
 @numba.njit(cache=True)
-def _spread1(v):
+def _spread1(v: int | np.uint64) -> np.uint64:
     """Two zero bits inserted between each of the low 21 bits of `v`, as uint64."""
     v = np.uint64(v) & np.uint64(0x1FFFFF)
     v = (v | (v << np.uint64(32))) & np.uint64(0x1F00000000FFFF)
@@ -191,7 +194,16 @@ def _spread1(v):
 
 
 @numba.njit(cache=True)
-def _neighbours(points, normals, cells, cell_code, cell_start, cell_end, d_max, d_min):
+def _neighbours(
+    points: np.ndarray,
+    normals: np.ndarray,
+    cells: np.ndarray,
+    cell_code: np.ndarray,
+    cell_start: np.ndarray,
+    cell_end: np.ndarray,
+    d_max: float,
+    d_min: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Neighbour lists (CSR) within d_max on the same side, their weights, and every candidate's weight sum.
 
     Returns offsets (m+1,) int64, nbr int32, w float32 (the per-pair weights), weight (m,) float64.
@@ -263,7 +275,7 @@ def _neighbours(points, normals, cells, cell_code, cell_start, cell_end, d_max, 
 
 
 @numba.njit(cache=True)
-def _eliminate(offsets, nbr, w, weight, target):
+def _eliminate(offsets: np.ndarray, nbr: np.ndarray, w: np.ndarray, weight: np.ndarray, target: int) -> np.ndarray:
     """Remove the heaviest candidate until `target` remain; returns the alive mask (m,) bool.
 
     The priority queue is a bucket queue over weight (`_BUCKETS` levels between 0 and the initial maximum,
@@ -305,7 +317,7 @@ def _eliminate(offsets, nbr, w, weight, target):
             if not alive[j]:
                 continue
             W[j] -= w[t]
-            b = max(np.int64(W[j] * scale), 0)
+            b = max(np.int64(W[j] * scale), 0)  # type: ignore[arg-type]  # max(int64, int): numba unifies, mypy wants one type
             old = level[j]
             if b == old:
                 continue
@@ -342,7 +354,7 @@ def cell_grid(points: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, 
 
 
 @numba.njit(cache=True, inline="always")
-def cell_runs(cells, cell_start, dims, i, runs):
+def cell_runs(cells: np.ndarray, cell_start: np.ndarray, dims: np.ndarray, i: int, runs: np.ndarray) -> int:
     """The point ranges (into `cell_grid`'s order) of point i's cell and the 26 around it, as up to 9 runs
     (start, stop) written into `runs` (9, 2) int64 (a run per column of cells); returns the number of runs."""
     ci, cj, ck = cells[i, 0], cells[i, 1], cells[i, 2]

@@ -76,9 +76,9 @@ def matrix_to_quaternion_xyzw(R: np.ndarray) -> np.ndarray:
     else:
         s = np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1]) * 2
         q = [(R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s, (R[1, 0] - R[0, 1]) / s]
-    q = np.asarray(q)
-    q /= np.linalg.norm(q)
-    return -q if q[3] < 0 else q
+    u: np.ndarray = np.asarray(q)
+    u /= np.linalg.norm(u)
+    return -u if u[3] < 0 else u
 
 
 def quaternion_xyzw_to_matrix(q: np.ndarray) -> np.ndarray:

@@ -31,6 +31,7 @@ import re
 import shutil
 import tempfile
 import xml.etree.ElementTree as ET
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -73,14 +74,14 @@ class _Link:
 
 
 def import_urdf(
-    urdf: str | os.PathLike,
-    out_dir: str | os.PathLike,
+    urdf: str | os.PathLike[str],
+    out_dir: str | os.PathLike[str],
     *,
     name: str | None = None,
     friction: float = 0.5,
     pregrasp_clearance: float = 0.02,
     approach: tuple[float, float, float] | None = None,
-    packages: dict[str, str | os.PathLike] | None = None,
+    packages: dict[str, str | os.PathLike[str]] | None = None,
 ) -> Path:
     """Write `<name>.json` and its meshes (`<name>-finger.stl`, `<name>-finger-left.stl` when the fingers differ,
     `<name>-body.stl`) into `out_dir`; returns the spec's path. The written spec is loaded and checked before
@@ -121,6 +122,12 @@ def _floats(text: str | None, n: int, what: str, default: tuple[float, ...] | No
     if len(values) != n or not all(math.isfinite(v) for v in values):
         raise InvalidGripperError(f"{what} = {text!r} is not {n} finite numbers")
     return np.array(values)
+
+
+def _number(el: ET.Element | None, key: str, what: str) -> float | None:
+    """The attribute `key` of `el` as a finite number; None when `el` or the attribute is absent."""
+    text = None if el is None else el.get(key)
+    return None if text is None else float(_floats(text, 1, what)[0])
 
 
 def _origin(el: ET.Element | None, what: str) -> np.ndarray:
@@ -164,9 +171,9 @@ def _model(root: ET.Element, path: Path, packages: dict[str, Any]) -> tuple[dict
         if parent is None or child is None or parent.get("link") not in links or child.get("link") not in links:
             raise InvalidGripperError(f"joint {jname!r} does not connect two links of the URDF")
         limit, mimic = el.find("limit"), el.find("mimic")
-        lower = float(limit.get("lower")) if limit is not None and limit.get("lower") is not None else None
-        upper = float(limit.get("upper")) if limit is not None and limit.get("upper") is not None else None
-        effort = float(limit.get("effort")) if limit is not None and limit.get("effort") is not None else None
+        lower = _number(limit, "lower", f"joint {jname!r} limit lower")
+        upper = _number(limit, "upper", f"joint {jname!r} limit upper")
+        effort = _number(limit, "effort", f"joint {jname!r} limit effort")
         axis_el = el.find("axis")
         joints.append(
             _Joint(
@@ -179,7 +186,11 @@ def _model(root: ET.Element, path: Path, packages: dict[str, Any]) -> tuple[dict
                 lower,
                 upper,
                 effort,
-                (mimic.get("joint") or "", float(mimic.get("multiplier", 1)), float(mimic.get("offset", 0)))
+                (
+                    mimic.get("joint") or "",
+                    float(_floats(mimic.get("multiplier", "1"), 1, f"joint {jname!r} mimic multiplier")[0]),
+                    float(_floats(mimic.get("offset", "0"), 1, f"joint {jname!r} mimic offset")[0]),
+                )
                 if mimic is not None
                 else None,
             )
@@ -189,14 +200,18 @@ def _model(root: ET.Element, path: Path, packages: dict[str, Any]) -> tuple[dict
 
 def _shape(el: ET.Element, link: str, path: Path, packages: dict[str, Any]) -> trimesh.Trimesh:
     what = f"link {link!r}"
+    shape: trimesh.Trimesh  # trimesh.creation's functions are unannotated
     if el.tag == "box":
-        return trimesh.creation.box(extents=_floats(el.get("size"), 3, f"{what} box size"))
+        shape = trimesh.creation.box(extents=_floats(el.get("size"), 3, f"{what} box size"))
+        return shape
     if el.tag == "cylinder":
         r = _floats(el.get("radius"), 1, f"{what} cylinder radius")[0]
         h = _floats(el.get("length"), 1, f"{what} cylinder length")[0]
-        return trimesh.creation.cylinder(radius=r, height=h, sections=48)
+        shape = trimesh.creation.cylinder(radius=r, height=h, sections=48)
+        return shape
     if el.tag == "sphere":
-        return trimesh.creation.icosphere(subdivisions=3, radius=_floats(el.get("radius"), 1, f"{what} radius")[0])
+        shape = trimesh.creation.icosphere(subdivisions=3, radius=_floats(el.get("radius"), 1, f"{what} radius")[0])
+        return shape
     if el.tag != "mesh":
         raise InvalidGripperError(
             f"{what} has geometry <{el.tag}>, which is not imported (mesh, box, cylinder, sphere)"
@@ -327,7 +342,7 @@ def _gripper(
     origin = (c_right + c_left) / 2  # in X, Y, Z coordinates
 
     def in_frame(v: np.ndarray, o: np.ndarray, flip: bool) -> np.ndarray:
-        p = v @ R - o
+        p: np.ndarray = v @ R - o
         return p * np.array([-1.0, -1.0, 1.0]) if flip else p
 
     finger_mesh = (in_frame(fingers[right][0], c_right, False), fingers[right][1])
@@ -391,7 +406,9 @@ def _subtree(link: str, joints: list[_Joint]) -> set[str]:
     return out
 
 
-def _vertices_faces(names, links: dict[str, _Link], T: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+def _vertices_faces(
+    names: Iterable[str], links: dict[str, _Link], T: dict[str, np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
     vertices, faces, offset = [], [], 0
     for n in sorted(names):
         for T_link_shape, mesh in links[n].shapes:
@@ -405,7 +422,12 @@ def _vertices_faces(names, links: dict[str, _Link], T: dict[str, np.ndarray]) ->
     return np.concatenate(vertices), np.concatenate(faces)
 
 
-def _approach(given, fingers, body, X: np.ndarray) -> np.ndarray:
+def _approach(
+    given: tuple[float, float, float] | None,
+    fingers: list[tuple[np.ndarray, np.ndarray]],
+    body: tuple[np.ndarray, np.ndarray],
+    X: np.ndarray,
+) -> np.ndarray:
     if given is not None:
         d = np.asarray(given, dtype=float)
         what = "the given approach"
@@ -421,7 +443,8 @@ def _approach(given, fingers, body, X: np.ndarray) -> np.ndarray:
         raise InvalidGripperError(
             f"{what} is along the closing axis: the approach cannot be told; give it (--approach x,y,z)"
         )
-    return d / n
+    unit: np.ndarray = d / n
+    return unit
 
 
 def _travel(
@@ -439,6 +462,8 @@ def _travel(
         raise InvalidGripperError(f"both finger joints ({right.name!r}, {left.name!r}) are mimics: one must drive")
     if right.mimic is not None or left.mimic is not None:
         follower, leader = (right, left) if right.mimic is not None else (left, right)
+        # the leader drives, so the loop above checked its limits
+        assert follower.mimic is not None and leader.lower is not None and leader.upper is not None
         if follower.mimic[0] != leader.name:
             target = by_name.get(follower.mimic[0])
             raise InvalidGripperError(
@@ -455,6 +480,8 @@ def _travel(
             )
         s = sorted((c_lead * leader.lower, c_lead * leader.upper))
         return w0 + 2 * s[0], w0 + 2 * s[1], leader.effort
+    # neither is a mimic: the loop above checked both joints' limits
+    assert right.lower is not None and right.upper is not None and left.lower is not None and left.upper is not None
     s_right = sorted((c_right * right.lower, c_right * right.upper))
     s_left = sorted((-c_left * left.lower, -c_left * left.upper))
     if max(abs(s_right[0] - s_left[0]), abs(s_right[1] - s_left[1])) > 1e-6:

@@ -61,7 +61,7 @@ def warmup(*, log: Any = None) -> dict[str, Any]:
         return out
 
     part = example_part("ring-screw")
-    small = {"points": 600, "k1": 3, "k2": 2}
+    small: dict[str, Any] = {"points": 600, "k1": 3, "k2": 2}
     gs = step("generate, swept", lambda: generate(part, EXAMPLE_GRIPPER, **small))
     step("generate, paper, inside", lambda: generate(part, EXAMPLE_GRIPPER, collision="paper", inside=True, **small))
     step("generate, best-near-medoid", lambda: generate(part, EXAMPLE_GRIPPER, select="best-near-medoid", **small))
@@ -75,7 +75,7 @@ def warmup(*, log: Any = None) -> dict[str, Any]:
     cloud, _ = trimesh.sample.sample_surface_even(sphere, 800, seed=rng)
     step("point cloud", lambda: generate(load_part(_npz(cloud), units="m", file_type="npz"), EXAMPLE_GRIPPER, **small))
     step("recluster", lambda: recluster(gs.candidates, gs.to_json(), k1=2, k2=2, select="best-near-medoid", mesh=part))
-    step("render", lambda: render_grasp_set(part.mesh, gs.to_json(), size=(64, 48)))
+    step("render", lambda: render_grasp_set(part.surface_mesh(), gs.to_json(), size=(64, 48)))
     step("memory probe", lambda: probe(part, EXAMPLE_GRIPPER))
     # the small runs above assign clusters serially; a real part's candidates take the parallel kernel
     from .clustering import compile_parallel_kernels

@@ -34,7 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _settings():  # type: ignore[no-untyped-def]
+def _settings():
     from pydantic import ValidationError
 
     from services.common.settings import get_settings
@@ -53,7 +53,7 @@ def _logging(level: str, fmt: str = "text") -> None:
     configure_logging(level, fmt)  # request and job ids on every line; JSON lines with GRASPGEN_LOG_FORMAT=json
 
 
-def _metrics_dir(settings) -> None:  # type: ignore[no-untyped-def]
+def _metrics_dir(settings) -> None:
     """prometheus-client's multiprocess mode for a command whose processes share numbers (serve --workers N, the
     Celery prefork pool): it reads PROMETHEUS_MULTIPROC_DIR when first imported, so this runs before that import."""
     import os
@@ -67,7 +67,7 @@ def _metrics_dir(settings) -> None:  # type: ignore[no-untyped-def]
     os.environ["PROMETHEUS_MULTIPROC_DIR"] = str(path)
 
 
-def _metrics_server(settings, dispatcher=None) -> None:  # type: ignore[no-untyped-def]
+def _metrics_server(settings, dispatcher=None) -> None:
     """The unauthenticated /metrics listener of GRASPGEN_METRICS_PORT, in a daemon thread of this process."""
     if settings.metrics_port is None:
         return
@@ -133,7 +133,7 @@ def _serve(args: argparse.Namespace) -> int:
     return 0
 
 
-def app_factory():  # type: ignore[no-untyped-def]
+def app_factory():
     """The app of one `serve --workers N` process: a spawned interpreter, so it sets up its own logging first."""
     from services.api.app import create_app
     from services.common.settings import get_settings

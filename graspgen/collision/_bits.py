@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import cast
+
 import numpy as np
 from numba import njit
 
@@ -15,7 +17,7 @@ def full_mask(rolls: int) -> np.uint64:
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def popcount(v):
+def popcount(v: np.uint64) -> np.uint64:
     """The number of set bits of the uint64 `v` (SWAR: no loop, no table)."""
     v = v - ((v >> np.uint64(1)) & np.uint64(0x5555555555555555))
     v = (v & np.uint64(0x3333333333333333)) + ((v >> np.uint64(2)) & np.uint64(0x3333333333333333))
@@ -28,9 +30,10 @@ def any_free(free: np.ndarray) -> np.ndarray:
     OR-ed as integers, several times faster than ndarray.any(axis=1) on millions of rows."""
     n, rolls = free.shape
     if rolls % 8 or not free.flags.c_contiguous:
-        return free.any(axis=1)
+        return cast(np.ndarray, free.any(axis=1))  # numpy's stubs give `any` with an axis a bool or an array
     words = free.view(np.uint64).reshape(n, rolls // 8)
     acc = words[:, 0].copy()
     for c in range(1, rolls // 8):
         acc |= words[:, c]
-    return acc != 0
+    nonzero: np.ndarray = acc != 0
+    return nonzero

@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections import namedtuple
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 
 from .. import libm
@@ -20,6 +21,9 @@ from ._bits import MAX_ROLLS, full_mask
 #: The roll angles' tables: cos, sin (R,) of 2 pi k / R by the C library (libm: the same bits on every CPU);
 #: half = R / 2 for even R (roll k + half turns (y, z) into (-y, -z)), else 0; gfac bounds the rounding of that
 #: symmetry per metre of radius; full = the mask of all R rolls; switch = the roll-0 reference's threshold.
+#: a candidate's frame as the kernels pass it: midpoint (3 floats), unit axis (3) and width
+Frame7 = tuple[float, float, float, float, float, float, float]
+
 Rolls = namedtuple("Rolls", ["cos", "sin", "half", "gfac", "full", "switch"])
 
 
@@ -46,7 +50,9 @@ def roll_table(rolls: int) -> Rolls:
 Candidates = namedtuple("Candidates", ["mids", "axes", "widths", "points", "i", "j", "inside"])
 
 
-def candidates_of_geometry(midpoints, axes, widths, inside) -> Candidates:
+def candidates_of_geometry(
+    midpoints: npt.ArrayLike, axes: npt.ArrayLike, widths: npt.ArrayLike, inside: npt.ArrayLike
+) -> Candidates:
     """Candidates given by midpoint, unit axis and width."""
     f = np.float64
     no_index = np.zeros(0, dtype=np.int64)
@@ -61,7 +67,7 @@ def candidates_of_geometry(midpoints, axes, widths, inside) -> Candidates:
     )
 
 
-def candidates_of_pairs(points, i, j, inside) -> Candidates:
+def candidates_of_pairs(points: npt.ArrayLike, i: npt.ArrayLike, j: npt.ArrayLike, inside: npt.ArrayLike) -> Candidates:
     """Candidates given as point index pairs (contact 0 = points[i]); the indices are checked (check_pairs)."""
     P = np.ascontiguousarray(points, dtype=np.float64)
     i, j = (np.ascontiguousarray(a, dtype=np.int64) for a in (i, j))
@@ -93,7 +99,7 @@ def check_pairs(n: int, i: np.ndarray, j: np.ndarray) -> None:
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def roll0_basis(ax, ay, az, switch):
+def roll0_basis(ax: float, ay: float, az: float, switch: float) -> tuple[float, float, float, float, float, float]:
     """(Y0, Z0) of the unit closing axis (ax, ay, az), as six floats: Z0 = the object's +Z made orthogonal to X (its
     +X when |X . z| > switch), Y0 = Z0 x X."""
     if abs(az) > switch:
@@ -111,7 +117,7 @@ def roll0_basis(ax, ay, az, switch):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def pair_frame(P, a, b):
+def pair_frame(P: np.ndarray, a: int, b: int) -> Frame7:
     """Midpoint (3 floats), unit axis (3) and width of the candidate (P[a], P[b]), with numpy's arithmetic for
     0.5 (p_a + p_b), d / |d| and |d| (d = p_b - p_a; the squares added in numpy's order): a candidate given as a pair
     gets, bit for bit, the frame that the same candidate given by geometry (made by numpy) has."""
@@ -129,7 +135,7 @@ def pair_frame(P, a, b):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def candidate_frame(c, q):
+def candidate_frame(c: Candidates, q: int) -> Frame7:
     """(midpoint, axis, width) of candidate q of the Candidates c, as seven floats (pair_frame for index pairs)."""
     if c.i.shape[0] > 0:
         return pair_frame(c.points, c.i[q], c.j[q])

@@ -9,11 +9,15 @@ over the hull's vertex graph: a vertex that no neighbour beats maximises a linea
 from __future__ import annotations
 
 from collections import namedtuple
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
 
 from ..params import TOLERANCES
+
+if TYPE_CHECKING:
+    from ._frame import Rolls
 
 __all__ = ["Hull", "build_hull", "hull_free", "cube_cell", "HULL_CELLS"]
 
@@ -27,7 +31,7 @@ Hull = namedtuple("Hull", ["vertices", "start", "adj", "bound", "arg", "info", "
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def cube_cell(ux, uy, uz, n):
+def cube_cell(ux: float, uy: float, uz: float, n: int) -> int:
     """The cell of unit direction u in a cube map of n x n cells per face: face f = 2 a + (u_a < 0) of the axis a of
     the largest |u_a|, then (u_{a+1}, u_{a+2}) / |u_a| in cells of 2 / n."""
     bx, by, bz = abs(ux), abs(uy), abs(uz)
@@ -43,7 +47,7 @@ def cube_cell(ux, uy, uz, n):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def hull_free(F, hull, target, rolls):
+def hull_free(F: np.ndarray, hull: Hull, target: np.uint64, rolls: Rolls) -> np.uint64:
     """The rolls within `target` at which every sample point lies in front of the palm: the support of the hull
     along -Z_k (the approach reversed), measured from the candidate's midpoint F[0:3], is below hull.threshold, so no
     point has z <= z_hi there and the palm cannot block the roll. F: midpoint, X, Y0, Z0 (12 floats)."""
@@ -75,7 +79,17 @@ def hull_free(F, hull, target, rolls):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _climb(W, start, adj, v, ux, uy, uz, shift, stop):
+def _climb(
+    W: np.ndarray,
+    start: np.ndarray,
+    adj: np.ndarray,
+    v: int,
+    ux: float,
+    uy: float,
+    uz: float,
+    shift: float,
+    stop: float,
+) -> tuple[int, float]:
     """(vertex, value) of max_w W[w] . u by a hill climb over the vertex graph (CSR start, adj) from vertex v, each
     step to the neighbour of largest value; it stops early once value + shift reaches `stop` (inf: never)."""
     best = W[v, 0] * ux + W[v, 1] * uy + W[v, 2] * uz
@@ -157,11 +171,14 @@ def _face_units(f: int, p: np.ndarray, q: np.ndarray) -> np.ndarray:
     u[..., a] = 1.0 if f % 2 == 0 else -1.0
     u[..., (a + 1) % 3] = p
     u[..., (a + 2) % 3] = q
-    return u / np.linalg.norm(u, axis=-1, keepdims=True)
+    unit: np.ndarray = u / np.linalg.norm(u, axis=-1, keepdims=True)
+    return unit
 
 
 @njit(cache=True)
-def _support_table(W, start, adj, U, val, arg):
+def _support_table(
+    W: np.ndarray, start: np.ndarray, adj: np.ndarray, U: np.ndarray, val: np.ndarray, arg: np.ndarray
+) -> None:
     """The support max_w W[w] . U[c] and its vertex for each direction U[c], each climb started where the previous
     one ended (neighbouring cells have neighbouring maxima)."""
     v = 0

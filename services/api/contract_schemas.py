@@ -49,7 +49,9 @@ Matrix4 = Annotated[
         examples=[[[1, 0, 0, 0.4], [0, 1, 0, 0], [0, 0, 1, 0.02], [0, 0, 0, 1]]],
     ),
 ]
-_IDENTITY = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+# Any: pydantic types json_schema_extra as JSON values, which list[list[float]] and dict[str, object] are not to mypy
+_IDENTITY: list[Any] = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+_EXAMPLE_GRIPPER: dict[str, Any] = dict(EXAMPLE_GRIPPER)
 
 
 # -- gripper spec -----------------------------------------------------------------------------------------------------
@@ -91,7 +93,7 @@ class GripperSpec(BaseModel):
     Y pad width, Z approach (the palm lies at -Z). Either the box fields (finger_width, finger_depth,
     finger_thickness, optional palm_depth, palm_width) or `geometry`, never both. Unknown fields are refused."""
 
-    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [dict(EXAMPLE_GRIPPER)]})
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [_EXAMPLE_GRIPPER]})
     name: str = Field(pattern=SLUG, description="slug", examples=["pgn-80"])
     kind: Literal["parallel"] | None = Field(None, description="the default kind")
     stroke: float = Field(gt=0, le=2, description="maximum opening between the finger pads, m")

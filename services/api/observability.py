@@ -105,7 +105,7 @@ def install(app: Any, settings: Any, dispatcher: Any) -> None:
     app.build_middleware_stack = build_middleware_stack
 
 
-def queue_depth_reader(settings: Any, dispatcher: Any):  # type: ignore[no-untyped-def]
+def queue_depth_reader(settings: Any, dispatcher: Any):
     pending = getattr(dispatcher, "pending", None)
     if callable(pending):
         return pending

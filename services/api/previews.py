@@ -41,7 +41,7 @@ class PreviewsBusy(Exception):  # noqa: N818 - a state, answered as a 503 proble
 class PreviewCache(SizedLRU[bytes]):
     """PNG bytes by (grasp set id, width, height), least recently used evicted first (the API's one LRU, cache.py)."""
 
-    def put(self, key: tuple[int, int, int], data: bytes) -> None:  # type: ignore[override]
+    def put(self, key: tuple[int, int, int], data: bytes) -> None:  # type: ignore[override]  # the size is the PNG's length, not the caller's
         super().put(key, data, len(data))
 
 
@@ -158,7 +158,7 @@ def _chain(inner: Future[bytes], outer: Future[bytes]) -> None:
         if f.cancelled():
             outer.cancel()
         elif f.exception() is not None:
-            outer.set_exception(f.exception())  # type: ignore[arg-type]
+            outer.set_exception(f.exception())
         else:
             outer.set_result(f.result())
 

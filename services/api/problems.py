@@ -138,7 +138,7 @@ def install_problem_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(GraspgenError)
     async def _graspgen_error(request: Request, exc: GraspgenError) -> JSONResponse:
-        extra = {"field": exc.field} if exc.field else {}
+        extra: dict[str, Any] = {"field": exc.field} if exc.field else {}
         return problem_response(422, exc.code, exc.message, title="Invalid input", instance=request.url.path, **extra)
 
     @app.exception_handler(RequestValidationError)
@@ -147,7 +147,7 @@ def install_problem_handlers(app: FastAPI) -> None:
             {"loc": [str(p) for p in e.get("loc", ())], "msg": e.get("msg", ""), "type": e.get("type", "")}
             for e in exc.errors()
         ]
-        first = errors[0] if errors else {"loc": [], "msg": "invalid request"}
+        first: dict[str, Any] = errors[0] if errors else {"loc": [], "msg": "invalid request"}
         where = ".".join(first["loc"])
         detail = f"{where}: {first['msg']}" if where else first["msg"]
         return problem_response(422, "validation-error", detail, instance=request.url.path, errors=errors)

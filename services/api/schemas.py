@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import uuid
 from datetime import datetime
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, cast
 
 from pydantic import BaseModel, ConfigDict, Field, WithJsonSchema, model_validator
 
@@ -15,8 +15,9 @@ SLUG = SLUG_PATTERN.pattern
 #: ids and version numbers are PostgreSQL `integer` columns: a larger number is no such row, never a database error
 ID_MAX = 2**31 - 1
 
-_GRIPPER_EXAMPLE = dict(EXAMPLE_GRIPPER)
-PARAMS_EXAMPLE = {"points": 10000, "safety_factor": 1.5, "rolls": 16, "k1": 16, "k2": 4, "seed": 0}
+# Any: pydantic types json_schema_extra as JSON values, which dict[str, object] is not to mypy
+_GRIPPER_EXAMPLE: dict[str, Any] = dict(EXAMPLE_GRIPPER)
+PARAMS_EXAMPLE: dict[str, Any] = {"points": 10000, "safety_factor": 1.5, "rolls": 16, "k1": 16, "k2": 4, "seed": 0}
 
 
 class Links(BaseModel):
@@ -278,6 +279,11 @@ class JobPage(Page):
     items: list[JobSummary]
 
 
+def _extra(model: type[BaseModel]) -> dict[str, Any]:
+    """A model's json_schema_extra, which this module always gives as a dict (pydantic also allows a callable)."""
+    return cast(dict[str, Any], model.model_config["json_schema_extra"])
+
+
 # -- grasp sets -------------------------------------------------------------------------------------------------------
 class GraspSetSummary(BaseModel):
     model_config = ConfigDict(
@@ -406,7 +412,7 @@ class PairItem(BaseModel):
             "example": {
                 "object": "ring-screw",
                 "gripper": "pgn-80",
-                "current": {**GraspSetSummary.model_config["json_schema_extra"]["example"], "created_by": "plant-7"},
+                "current": {**_extra(GraspSetSummary)["example"], "created_by": "plant-7"},
                 "released": True,
                 "released_id": 17,
                 "stale": False,

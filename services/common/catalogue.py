@@ -86,7 +86,7 @@ class PairState:
     change_seq: int
 
 
-def _newest_versions(session: Session, model, owner_column, owner_ids: set[int]) -> dict[int, int]:  # type: ignore[no-untyped-def]
+def _newest_versions(session: Session, model, owner_column, owner_ids: set[int]) -> dict[int, int]:
     """owner id -> id of its highest version (object or gripper versions), one query for all owners."""
     top = (
         select(owner_column.label("owner"), func.max(model.version).label("v"))

@@ -144,7 +144,7 @@ def _make_engine(url: str, settings: Settings) -> Engine:
     return engine
 
 
-def _drop_closed_on_checkout(dbapi_conn, _record, _proxy) -> None:  # type: ignore[no-untyped-def]
+def _drop_closed_on_checkout(dbapi_conn, _record, _proxy) -> None:
     """Replace a pooled connection whose server side is gone, without a round trip.
 
     An idle PostgreSQL connection has nothing to read: every reply was consumed up to ReadyForQuery. A readable (or
@@ -163,7 +163,7 @@ def _drop_closed_on_checkout(dbapi_conn, _record, _proxy) -> None:  # type: igno
 
 def _sqlite_pragmas(engine: Engine) -> None:
     @event.listens_for(engine, "connect")
-    def _on_connect(dbapi_conn, _record):  # type: ignore[no-untyped-def]
+    def _on_connect(dbapi_conn, _record):
         # the driver's own transaction handling is off so that BEGIN IMMEDIATE below is the only one: writers then
         # queue on the busy timeout instead of failing when a read transaction tries to upgrade to a write
         dbapi_conn.isolation_level = None
@@ -175,7 +175,7 @@ def _sqlite_pragmas(engine: Engine) -> None:
         cur.close()
 
     @event.listens_for(engine, "begin")
-    def _on_begin(conn):  # type: ignore[no-untyped-def]
+    def _on_begin(conn):
         # read sessions (API GETs) read a WAL snapshot and take no lock, so a long read never makes lookups or
         # writers wait; everything else may write, so it takes the write lock up front
         read_only = conn.get_execution_options().get("graspgen_read_only", False)

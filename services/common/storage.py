@@ -20,7 +20,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import BinaryIO
+from typing import BinaryIO, cast
 from urllib.parse import urlsplit
 
 from .settings import Settings
@@ -199,7 +199,7 @@ class LocalStorage(Storage):
     def _upload_bytes(self, data: bytes, key: str) -> None:
         self._write(key, lambda out: out.write(data))  # no intermediate temp file: the bytes go to the final shard
 
-    def _write(self, key: str, fill) -> None:  # type: ignore[no-untyped-def]
+    def _write(self, key: str, fill) -> None:
         """A temp file in the blob's own directory, filled, fsynced and renamed into place; removed on any error."""
         final = self._path(key)
         final.parent.mkdir(parents=True, exist_ok=True)
@@ -257,7 +257,7 @@ class S3Storage(Storage):
             if exc.response.get("Error", {}).get("Code") in ("404", "NoSuchKey", "NotFound"):
                 raise FileNotFoundError(key) from None
             raise
-        return obj["Body"]  # a StreamingBody: read(n), close(), context manager
+        return cast(BinaryIO, obj["Body"])  # a StreamingBody: read(n), close(), context manager
 
     def size(self, key: str) -> int:
         from botocore.exceptions import ClientError

@@ -20,8 +20,8 @@ class Versioned:
     """The table of the named things, the table of their versions (linked by `<what>_id`) and their API path."""
 
     what: str  # "object" | "gripper": messages, the link column, catalogue.refresh's keyword
-    table: type
-    versions: type
+    table: type[Any]  # the mapped classes: ObjectModel or Gripper
+    versions: type[Any]  # ObjectVersion or GripperVersion
     path: str
 
     @property

@@ -10,7 +10,6 @@ from sqlalchemy.orm import Session
 
 from graspgen.params import Params, QualityOptions, from_job
 from services.api.schemas import ID_MAX, PARAMS_DOC, PARAMS_EXAMPLE, SLUG, BulkItem, NoNulModel
-from services.common.models import GripperVersion, ObjectVersion
 from services.common.versions import GRIPPERS, OBJECTS, Versioned, find_version
 
 from .kind import JobKind, RunContext
@@ -57,8 +56,9 @@ class GenerateJobRequest(NoNulModel):
 
 
 # -- submission (the API) ---------------------------------------------------------------------------------------------
-def _version(session: Session, kind: Versioned, name: str, version: int | None) -> ObjectVersion | GripperVersion:
-    """The object's or gripper's given version, or its newest; 422 `unknown-<what>` when there is none."""
+def _version(session: Session, kind: Versioned, name: str, version: int | None) -> Any:
+    """The object's or gripper's given version (an ObjectVersion or a GripperVersion, as `kind` says), or its newest;
+    422 `unknown-<what>` when there is none."""
     from services.api.problems import ApiError  # the worker imports this module for `run` and never loads the API
 
     v = find_version(session, kind, name, version)

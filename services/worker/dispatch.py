@@ -61,7 +61,9 @@ class CeleryDispatcher(Dispatcher):
         try:
             sig = [
                 self.app.signature(self.task_name, args=(jid,), immutable=True).set(
-                    task_id=jid, queue=self.queue, headers=headers
+                    task_id=jid,
+                    queue=self.queue,
+                    headers=headers,  # type: ignore[arg-type]  # None is Celery's own default; celery-types says dict
                 )
                 for jid in job_ids
             ]
@@ -89,7 +91,7 @@ class CeleryDispatcher(Dispatcher):
 class EmbeddedDispatcher(Dispatcher):
     """A thread pool inside the API process running `run_job.apply` (the Celery task, executed locally)."""
 
-    def __init__(self, settings: Settings, db: Database, storage) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, settings: Settings, db: Database, storage) -> None:
         from services.worker.celery_app import job_task, make_celery
         from services.worker.runner import JobRunner
 
@@ -159,7 +161,7 @@ def _request_headers() -> dict[str, str] | None:
     return {REQUEST_ID_MESSAGE_HEADER: rid} if rid else None
 
 
-def make_dispatcher(settings: Settings, db: Database, storage) -> Dispatcher:  # type: ignore[no-untyped-def]
+def make_dispatcher(settings: Settings, db: Database, storage) -> Dispatcher:
     if settings.embedded_worker:
         return EmbeddedDispatcher(settings, db, storage)
     return CeleryDispatcher(settings)

@@ -34,6 +34,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from datetime import timedelta
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from sqlalchemy import select
 
@@ -42,6 +43,9 @@ from services.common.models import Job, utcnow
 from services.common.settings import Settings
 from services.jobkinds import CONTAINER_KINDS
 from services.worker.runner import abandoned_before
+
+if TYPE_CHECKING:
+    from services.worker.dispatch import CeleryDispatcher
 
 __all__ = [
     "Reconciler",
@@ -84,7 +88,7 @@ class Reconciler:
         self.settings = settings
         self.db = db or Database(settings)
         self._owns_db = db is None
-        self._dispatcher = None
+        self._dispatcher: CeleryDispatcher | None = None
 
     # -- one pass -------------------------------------------------------------------------------------------------
     def run_once(self) -> Pass:
@@ -129,7 +133,7 @@ class Reconciler:
         ids = None if only is None else [uuid.UUID(str(i)) for i in only]
         with self.db.read_sessions() as s:
 
-            def select_ids(*where) -> list[str]:  # type: ignore[no-untyped-def]
+            def select_ids(*where) -> list[str]:
                 q = select(Job.id).where(Job.kind.not_in(CONTAINER_KINDS), *where)
                 if ids is not None:
                     q = q.where(Job.id.in_(ids))
@@ -144,7 +148,7 @@ class Reconciler:
         import redis
 
         opts = {"socket_timeout": 10, "socket_connect_timeout": 5}
-        client = redis.Redis.from_url(self.settings.broker_url.get_secret_value(), **opts)  # type: ignore[union-attr]
+        client = redis.Redis.from_url(self.settings.broker_url.get_secret_value(), **opts)  # type: ignore[union-attr]  # runs with a broker: broker_url is set
         prefix = self.settings.broker_key_prefix
         found: set[str] = set()
         try:
@@ -288,13 +292,13 @@ def connect_worker_signals(settings: Settings) -> None:
     services/worker/celery_main.py), never on import; connecting again replaces the earlier connection."""
     from celery.signals import worker_process_init, worker_ready, worker_shutdown
 
-    def on_ready(sender=None, **_kw) -> None:  # type: ignore[no-untyped-def]
+    def on_ready(sender=None, **_kw) -> None:
         start(settings)
 
-    def on_shutdown(sender=None, **_kw) -> None:  # type: ignore[no-untyped-def]
+    def on_shutdown(sender=None, **_kw) -> None:
         stop()
 
-    def on_child(sender=None, **_kw) -> None:  # type: ignore[no-untyped-def]
+    def on_child(sender=None, **_kw) -> None:
         use_private_tempdir()
 
     for signal, handler in ((worker_ready, on_ready), (worker_shutdown, on_shutdown), (worker_process_init, on_child)):

@@ -114,7 +114,7 @@ class JobRunner:
                 from graspgen.memory import MemoryLimitError
                 from services.common.memory_guard import problem_extra
 
-                fields = {"field": exc.field} if exc.field else {}
+                fields: dict[str, Any] = {"field": exc.field} if exc.field else {}
                 if isinstance(exc, MemoryLimitError):
                     fields.update(problem_extra(exc))  # the largest point count that fits, the estimate, the budget
                 err = jobs.problem(exc.code, "Invalid input", exc.message, **fields)
@@ -269,7 +269,7 @@ class JobRunner:
             rec.disconnect()  # finalises the .rrd (footer) now rather than at garbage collection
         return export_bytes, gs.stats, gs.grasps, candidates, rrd
 
-    def _check_memory(self, inp: JobInputs, path: Path, gripper: Callable[[], Any]):  # type: ignore[no-untyped-def]
+    def _check_memory(self, inp: JobInputs, path: Path, gripper: Callable[[], Any]):
         """The part, loaded once, after the job's estimated peak memory was checked against this worker's budget
         (with the job's gripper, `gripper()`, when no probe of the part and gripper is cached)."""
         from graspgen.parts import load_part
@@ -398,7 +398,7 @@ class JobRunner:
         try:
             with self.db.session() as s:
                 s.execute(select(ObjectModel.id).where(ObjectModel.id == inp.object_id).with_for_update())
-                used: set[str] = set()
+                used: set[str | None] = set()  # the columns are nullable; `in_(mine)` matches no NULL
                 for column in (GraspSet.export_key, GraspSet.candidates_key, GraspSet.recording_key):
                     used.update(s.execute(select(column).where(column.in_(mine))).scalars())
                 used.update(s.execute(select(ObjectVersion.file_key).where(ObjectVersion.file_key.in_(mine))).scalars())

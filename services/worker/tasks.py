@@ -43,7 +43,7 @@ def get_runner(app: Celery) -> JobRunner:
 
 
 class JobTask(Task):
-    def on_failure(self, exc, task_id, args, kwargs, einfo):  # type: ignore[no-untyped-def]
+    def on_failure(self, exc, task_id, args, kwargs, einfo):
         # a hard time limit kills the child process; this hook then runs in the worker's main process
         if isinstance(exc, TimeLimitExceeded) and args:
             try:

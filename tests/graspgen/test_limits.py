@@ -109,6 +109,30 @@ def test_hostile_files_are_refused_by_what_they_declare(name: str, data: bytes, 
     assert _peak_mb() - before < 50
 
 
+@pytest.mark.parametrize(
+    "accessor",
+    [
+        {"type": ["VEC3"]},  # not hashable: was a TypeError out of the size check
+        {"componentType": {"x": 5126}},
+        {"byteOffset": "0"},
+    ],
+    ids=["type-a-list", "component-type-an-object", "byte-offset-a-string"],
+)
+def test_glb_accessor_fields_of_the_wrong_json_type_are_refused_as_invalid(accessor: dict[str, object]) -> None:
+    tree = {
+        "asset": {"version": "2.0"},
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "buffers": [{"byteLength": 36}],
+        "bufferViews": [{"buffer": 0, "byteLength": 36}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "mode": 4}]}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", **accessor}],
+    }
+    with pytest.raises(InvalidMeshError) as err:
+        load_part(mc.glb(tree, bytes(36)), units="mm", file_type="glb")
+    assert err.value.field == "file"
+
+
 def test_the_default_limit_admits_a_binary_stl_at_the_upload_limit() -> None:
     triangles = (50 * 2**20 - 84) // 50  # the API's default 50 MB upload limit
     assert 96 * triangles < MAX_DECODED_BYTES

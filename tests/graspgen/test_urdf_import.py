@@ -122,6 +122,8 @@ REFUSALS = [
     ({"joint2_extra": '<mimic joint="finger_joint1" multiplier="2"/>'}, "do not close symmetrically"),
     ({"joint2_extra": '<mimic joint="nothing"/>'}, "no such joint"),
     ({"joint1_limit": ""}, "no limits"),
+    ({"joint1_limit": '<limit lower="zero" upper="0.04" effort="70"/>'}, "limit lower = 'zero'"),
+    ({"joint2_extra": '<mimic joint="finger_joint1" multiplier="one"/>'}, "mimic multiplier = 'one'"),
     ({"right_geometry": False}, "has no collision or visual geometry"),
 ]
 

@@ -146,7 +146,7 @@ def _int_cursor(cursor: str | None) -> list[Any] | None:
     return key
 
 
-def _id_of(session: Session, model: type, name: str, what: str, status: int = 404) -> int:
+def _id_of(session: Session, model: type[Any], name: str, what: str, status: int = 404) -> int:
     i = session.execute(select(model.id).where(model.name == name)).scalar_one_or_none()
     if i is None:
         raise ApiError(status, "not-found", f"no {what} named {name!r}")
@@ -330,7 +330,7 @@ def list_catalogue(
     grip_id = _id_of(session, Gripper, gripper, "gripper")
     by_seq = since is not None
     key = decode_cursor(cursor, (int, int) if by_seq else (str, int))
-    if by_seq and since < 0:
+    if since is not None and since < 0:
         raise ApiError(422, "validation-error", "since must be >= 0", field="since")
     if key:
         after, mark = key

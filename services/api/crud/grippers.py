@@ -76,6 +76,7 @@ def create_gripper(
     if digests and (files is None or storage is None):
         raise RuntimeError("a geometry spec is stored with its files and a storage")
     for path in digests:
+        assert files is not None and storage is not None  # checked above
         blob = storage.put_bytes(files[path])  # StorageError -> 503, nothing in the database
         rows.append({"path": path, "sha256": blob.sha256, "size_bytes": blob.size, "file_key": blob.key})
     v, created = add_version(

@@ -199,7 +199,7 @@ def submit_bulk(
             # a bad item fails alone; the others run
             J.finish(child, "failed", error=J.problem(exc.code, exc.title, exc.detail, status=exc.status, **exc.extra))
         except GraspgenError as exc:
-            extra = {"field": exc.field} if exc.field else {}
+            extra: dict[str, Any] = {"field": exc.field} if exc.field else {}
             J.finish(child, "failed", error=J.problem(exc.code, "Invalid input", exc.message, **extra))
         children.append(child)
     session.add_all(children)

@@ -55,7 +55,12 @@ def list_pairs(
     key = decode_cursor(cursor, (str, str))
     if key and any(len(k) > _NAME_MAX for k in key):
         raise ApiError(422, "invalid-cursor", "the cursor is not one this endpoint issued")
-    filters = {"object_contains": object_contains, "gripper": gripper, "released": released, "stale": stale}
+    filters: dict[str, Any] = {
+        "object_contains": object_contains,
+        "gripper": gripper,
+        "released": released,
+        "stale": stale,
+    }
     base = (
         select(
             CataloguePair.object_id,

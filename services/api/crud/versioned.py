@@ -114,8 +114,9 @@ def named_out(
 def list_page(session: Session, kind: Versioned, *, cursor: str | None, limit: int) -> dict[str, Any]:
     """One page of the things that have a version, by name, with their latest version number."""
     key = decode_cursor(cursor, (str,))
-    latest = select(kind.link.label("id"), func.max(kind.versions.version).label("latest")).group_by(kind.link)
-    latest = latest.subquery()
+    latest = (
+        select(kind.link.label("id"), func.max(kind.versions.version).label("latest")).group_by(kind.link).subquery()
+    )
     q = select(kind.table, latest.c.latest).join(latest, latest.c.id == kind.table.id)
     if key:
         q = q.where(kind.table.name > key[0])

@@ -110,8 +110,8 @@ def get_recording(
     return _artifact(request, storage, gs.recording_key, f"grasp-set-{gs.id}.rrd")
 
 
-def _artifact(request: Request, storage: Storage, key: str, filename: str) -> Response:
-    """An immutable binary artifact of a grasp set, as a download."""
+def _artifact(request: Request, storage: Storage, key: str | None, filename: str) -> Response:
+    """An immutable binary artifact of a grasp set, as a download (404 when it was not stored: key None)."""
     return blob_response(
         request, storage, key, media_type="application/octet-stream", filename=filename, cache_control=IMMUTABLE
     )

@@ -79,7 +79,7 @@ async def _multipart(request: Request, settings: Settings) -> tuple[Any, dict[st
         spec_field = form.getlist("spec")
         if len(spec_field) != 1:
             raise ApiError(422, "invalid-gripper", "the multipart body needs one field `spec` (the JSON)", field="spec")
-        text = spec_field[0]
+        text: UploadFile | str | bytes = spec_field[0]
         if isinstance(text, UploadFile):  # sent as a file part (curl -F spec=@spec.json)
             text = await _read_limited(text, "spec", settings.max_json_bytes)
         try:
