@@ -110,7 +110,7 @@ class SweptMesh:
 
 
 @njit(cache=True)
-def _bin(i0, i1, shape, entries):
+def _bin(i0: np.ndarray, i1: np.ndarray, shape: np.ndarray, entries: int) -> tuple[np.ndarray, np.ndarray]:
     """CSR lists of the triangles over the grid's cells: triangle k lies in cells [i0[k], i1[k]] (inclusive)."""
     gx, gy = shape[0], shape[1]
     count = np.zeros(gx * gy + 1, dtype=np.int64)
@@ -131,7 +131,7 @@ def _bin(i0, i1, shape, entries):
 
 
 @njit(cache=True, inline="always")
-def _edge(ax, ay, bx, by, px, py):
+def _edge(ax: float, ay: float, bx: float, by: float, px: float, py: float) -> float:
     """The edge function of the directed edge a -> b at p (> 0: p left of it), computed with the end points in
     lexicographic order, so that b -> a gives exactly the negated value."""
     if ax < bx or (ax == bx and ay <= by):
@@ -140,7 +140,7 @@ def _edge(ax, ay, bx, by, px, py):
 
 
 @njit(cache=True, inline="always")
-def _owns(ax, ay, bx, by, px, py):
+def _owns(ax: float, ay: float, bx: float, by: float, px: float, py: float) -> bool:
     """Is p on the inner side of the counter-clockwise edge a -> b, the edge itself belonging to the triangle when
     it is a top or a left edge (the top-left rule)?"""
     e = _edge(ax, ay, bx, by, px, py)
@@ -153,7 +153,7 @@ def _owns(ax, ay, bx, by, px, py):
 
 
 @njit(cache=True)
-def _crossing(T, px, py):
+def _crossing(T: np.ndarray, px: float, py: float) -> tuple[int, float]:
     """Where the vertical line through (px, py) crosses triangle T (3, 3): (sign, z); sign +1 where T faces down
     (the line enters the solid going up), -1 where it faces up, 0 for no crossing (or a vertical triangle)."""
     ax, ay, bx, by, cx, cy = T[0, 0], T[0, 1], T[1, 0], T[1, 1], T[2, 0], T[2, 1]
@@ -176,7 +176,7 @@ def _crossing(T, px, py):
 
 
 @njit(cache=True, inline="always")
-def _segment_distance2_2d(ax, ay, bx, by, px, py):
+def _segment_distance2_2d(ax: float, ay: float, bx: float, by: float, px: float, py: float) -> float:
     dx, dy = bx - ax, by - ay
     L = dx * dx + dy * dy
     s = 0.0
@@ -187,7 +187,7 @@ def _segment_distance2_2d(ax, ay, bx, by, px, py):
 
 
 @njit(cache=True)
-def _xy_distance(T, px, py):
+def _xy_distance(T: np.ndarray, px: float, py: float) -> float:
     """Distance (m) from the vertical line through (px, py) to triangle T: from the point to T's projection."""
     ax, ay, bx, by, cx, cy = T[0, 0], T[0, 1], T[1, 0], T[1, 1], T[2, 0], T[2, 1]
     e0 = (bx - ax) * (py - ay) - (by - ay) * (px - ax)
@@ -203,7 +203,7 @@ def _xy_distance(T, px, py):
 
 
 @njit(cache=True)
-def _distance(T, px, py, pz):
+def _distance(T: np.ndarray, px: float, py: float, pz: float) -> float:
     """Distance (m) from p to triangle T (3, 3) (Ericson, Real-Time Collision Detection, 5.1.5)."""
     ax, ay, az = T[0, 0], T[0, 1], T[0, 2]
     abx, aby, abz = T[1, 0] - ax, T[1, 1] - ay, T[1, 2] - az
@@ -246,7 +246,7 @@ def _distance(T, px, py, pz):
 
 
 @njit(cache=True)
-def _near_interval(T, px, py, pz, tol):
+def _near_interval(T: np.ndarray, px: float, py: float, pz: float, tol: float) -> tuple[float, float]:
     """The interval [lo, hi] of u where p + u Z lies within `tol` of triangle T (lo > hi: nowhere). The distance is
     convex in u: its minimum by golden section, the interval's ends by bisection."""
     zmin = min(T[0, 2], min(T[1, 2], T[2, 2]))
@@ -292,7 +292,7 @@ def _near_interval(T, px, py, pz, tol):
 
 
 @njit(cache=True)
-def _uncovered(a, b, lo, hi, order, n):
+def _uncovered(a: float, b: float, lo: np.ndarray, hi: np.ndarray, order: np.ndarray, n: int) -> bool:
     """Is some part of [a, b] (a <= b) outside the union of the closed intervals [lo[k], hi[k]] (k in order[:n],
     sorted by lo)? A single point a == b counts; a gap of no length between intervals that touch does not."""
     if a == b:
@@ -312,7 +312,7 @@ def _uncovered(a, b, lo, hi, order, n):
 
 
 @njit(cache=True, nogil=True)
-def _sweep_hits(grid, points, distance, tol, first):
+def _sweep_hits(grid: SweepGrid, points: np.ndarray, distance: float, tol: float, first: bool) -> np.ndarray:
     """For each point q (n, 3): does the segment q + u Z, u in [0, distance], meet the closed mesh eroded by `tol`
     (<= grid.grow)? (n,) bool; with `first`, the points after the first hit are left False."""
     T, start, items = grid.triangles, grid.start, grid.items

@@ -568,7 +568,7 @@ class SimGripper:
 #: a gripper mesh of more closed shells than this is decomposed as a whole (_solid_pieces)
 _MAX_SHELLS = 32
 #: SimGripper per geometry (its files' digests) and decomposition setting
-_GRIPPERS: OrderedDict = OrderedDict()
+_GRIPPERS: OrderedDict[tuple[object, ...], SimGripper] = OrderedDict()
 _GRIPPERS_KEPT = 4
 
 
@@ -691,6 +691,7 @@ def _xml(
         for k in range(len(pieces))
     )
     palm = ""
+    fingers: Sequence[str]  # the two fingers' geoms: the -X finger's, then the +X finger's
     if gripper is None:
         # inner faces at x = -+stroke/2 when the joints are at 0 (fully open); a joint value q closes each finger by q
         finger = (

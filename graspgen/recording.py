@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import uuid
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -79,8 +80,8 @@ def _log_validation(stream: rr.RecordingStream, result: GraspSet) -> None:
     if not any("sim" in g for g in result.grasps):
         return
     if result.gripper.geometry is not None:
-        colours = [SIM_COLOURS[bool(g["sim"]["success"])] if "sim" in g else None for g in result.grasps]
-        _log_gripper_meshes(stream, "grasps/validation", result, colours)
+        outcomes = [SIM_COLOURS[bool(g["sim"]["success"])] if "sim" in g else None for g in result.grasps]
+        _log_gripper_meshes(stream, "grasps/validation", result, outcomes)
         return
     centers, half, quats, colours, names = [], [], [], [], []
     for rank, g in enumerate(result.grasps):
@@ -196,7 +197,12 @@ def _log(
     )
 
 
-def _log_gripper_meshes(stream, path: str, result, colours: list) -> None:
+def _log_gripper_meshes(
+    stream: rr.RecordingStream,
+    path: str,
+    result: GraspSet,
+    colours: Sequence[tuple[int, int, int] | np.ndarray | None],
+) -> None:
     """A gripper from CAD at every grasp (colour None: left out) as one Mesh3D of its real finger and body meshes."""
     import rerun as rr
 

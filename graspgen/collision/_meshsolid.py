@@ -20,11 +20,12 @@ from __future__ import annotations
 import hashlib
 import threading
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 from numba import njit
 
-from ._shapes import Cuboid
+from ._shapes import Cuboid, Vec3
 from ._tritree import COUNT, LEFT, M_C, M_H, RIGHT, START, MeshTree, TriangleTree, build_tree, empty_tree, tri_box
 
 __all__ = ["MeshSolid", "MeshSet", "mesh_solid", "inner_boxes"]
@@ -53,7 +54,7 @@ class MeshSet:
     right: MeshSolid
     body: MeshSolid | None
 
-    def records(self) -> tuple:
+    def records(self) -> tuple[TriangleTree, TriangleTree, TriangleTree]:
         """(left, right, body) as TriangleTrees, an empty one for no body (the triangle kernel's `solids`)."""
         return (self.left.record(), self.right.record(), self.body.record() if self.body else empty_tree())
 
@@ -90,7 +91,7 @@ def mesh_solid(vertices: np.ndarray, faces: np.ndarray) -> MeshSolid:
 
 
 @njit(cache=True, error_model="numpy")
-def _box_meets_tree(tree, c, e):
+def _box_meets_tree(tree: TriangleTree, c: np.ndarray, e: np.ndarray) -> bool:
     """Does any triangle of the tree meet the closed box with centre c (3,) and half extents e (3,)?"""
     nodes, children, T = tree.nodes, tree.children, tree.triangles
     if nodes.shape[0] == 0:
@@ -119,7 +120,7 @@ def _box_meets_tree(tree, c, e):
 
 
 @njit(cache=True, error_model="numpy")
-def _winding(T, p):
+def _winding(T: np.ndarray, p: np.ndarray) -> float:
     """The generalised winding number of the closed triangle soup T (m, 3, 3) at p: 1 inside, 0 outside (van
     Oosterom and Strackee's solid angle of each triangle, summed over 4 pi)."""
     total = 0.0
@@ -209,5 +210,5 @@ def inner_boxes(tree: MeshTree, vertices: np.ndarray, grid: int = 10, most: int 
             break
         covered |= now
         covered[k] = True
-        boxes.append(Cuboid(tuple(float(v) for v in b_lo), tuple(float(v) for v in b_hi)))
+        boxes.append(Cuboid(cast(Vec3, tuple(float(v) for v in b_lo)), cast(Vec3, tuple(float(v) for v in b_hi))))
     return tuple(boxes)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import hashlib
 import threading
 from collections import namedtuple
+from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
@@ -53,6 +54,11 @@ from ._regions import (
     fixed_x_ranges,
     region_table,
 )
+
+if TYPE_CHECKING:
+    from ._frame import Rolls
+    from ._hull import Hull
+    from ._regions import Regions
 
 __all__ = ["free_rolls", "free_rolls_of_pairs", "free_rolls_stats", "STATS"]
 
@@ -110,7 +116,9 @@ Work = namedtuple("Work", ["stack", "caches", "pos", "memo", "grid"])
 
 
 @njit(cache=True)
-def _pca_box(Q, order, a, b):
+def _pca_box(
+    Q: np.ndarray, order: np.ndarray, a: int, b: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The oriented box of the points Q[order[a:b]]: (mean, covariance sum, axes as rows with the principal one
     first, lower and upper bounds of the points along each axis, relative to the mean)."""
     cnt = b - a
@@ -142,7 +150,7 @@ def _pca_box(Q, order, a, b):
 
 
 @njit(cache=True)
-def _split_cost(Q, order, a, b, thick):
+def _split_cost(Q: np.ndarray, order: np.ndarray, a: int, b: int, thick: float) -> float:
     """Cost of a child holding the points Q[order[a:b]]: the radius of the ball around its oriented box plus
     `thick` times the box's thinnest half extent (the fingers' slab test is as tight as a node is thin)."""
     _, _, _, lo, hi = _pca_box(Q, order, a, b)
@@ -152,11 +160,14 @@ def _split_cost(Q, order, a, b, thick):
         h = 0.5 * (hi[i] - lo[i])
         r2 += h * h
         thin = min(thin, h)
-    return np.sqrt(r2) + thick * thin
+    cost: float = np.sqrt(r2) + thick * thin
+    return cost
 
 
 @njit(cache=True)
-def _build_tree(P, N, leaves, pad, weight, thick):
+def _build_tree(
+    P: np.ndarray, N: np.ndarray, leaves: int, pad: float, weight: float, thick: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Balanced implicit binary tree over a permutation of the points P (n, 3): node 1 is the root, children 2k and
     2k + 1, leaves from `leaves` on. Node k at depth d (t = k - 2^d) holds the points [t n >> d, (t + 1) n >> d) of
     the permuted order. Each inner node splits its points at the median along their principal axis or, given the
@@ -249,7 +260,17 @@ def _build_tree(P, N, leaves, pad, weight, thick):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _point_mask(tree, p, F, rows, r0, r1, xr, rolls, todo):
+def _point_mask(
+    tree: PointTree,
+    p: int,
+    F: np.ndarray,
+    rows: np.ndarray,
+    r0: int,
+    r1: int,
+    xr: np.ndarray,
+    rolls: Rolls,
+    todo: np.uint64,
+) -> np.uint64:
     """The rolls within `todo` at which point p of the tree lies in one of the regions r0..r1-1: the exact per-roll
     arithmetic (see the module docstring). F: the candidate's midpoint, X, Y0, Z0 (12 floats); xr (r, 2): the
     regions' bounds along X for this candidate."""
@@ -321,7 +342,7 @@ def _point_mask(tree, p, F, rows, r0, r1, xr, rolls, todo):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _cell(grid, x, y, z):
+def _cell(grid: np.ndarray, x: float, y: float, z: float) -> int:
     """Index of the memo cell holding (x, y, z); grid = origin xyz, 1 / cell size, dims xyz. -1 outside."""
     i = int(np.floor((x - grid[0]) * grid[3]))
     j = int(np.floor((y - grid[1]) * grid[3]))
@@ -333,15 +354,16 @@ def _cell(grid, x, y, z):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _palm_key_z(rows, r):
+def _palm_key_z(rows: np.ndarray, r: int) -> float:
     """Where along Z the fixed regions' memo key lies: the centre of region r's front, as deep as the region is wide
     (or the region's centre if it is shallower). The approach region reaches a part's length behind the fingers,
     mostly outside the memo's grid: its front is where blockers recur."""
-    return max(0.5 * (rows[r, ZLO] + rows[r, ZHI]), rows[r, ZHI] - rows[r, HY])
+    z: float = max(0.5 * (rows[r, ZLO] + rows[r, ZHI]), rows[r, ZHI] - rows[r, HY])
+    return z
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _palm_cell(grid, F, zm, ck, sk):
+def _palm_cell(grid: np.ndarray, F: np.ndarray, zm: float, ck: float, sk: float) -> int:
     """Memo cell of the fixed regions' key at the roll (cos, sin) = (ck, sk): midpoint + zm Z."""
     zx = ck * F[9] - sk * F[6]
     zy = ck * F[10] - sk * F[7]
@@ -350,7 +372,7 @@ def _palm_cell(grid, F, zm, ck, sk):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _remember(memo, phase, cell, p):
+def _remember(memo: np.ndarray, phase: int, cell: int, p: int) -> None:
     """Point p blocked in memo cell `cell` (phase 0: fingers, 1: fixed regions): it goes first, the others move down."""
     if cell >= 0 and memo[phase, cell, 0] != p:
         for slot in range(memo.shape[2] - 1, 0, -1):
@@ -359,7 +381,7 @@ def _remember(memo, phase, cell, p):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _phase_rows(regions, phase):
+def _phase_rows(regions: Regions, phase: int) -> tuple[int, int]:
     """The rows a phase tests: the fingers (phase 0) or the fixed regions (phase 1)."""
     if phase == 0:
         return 0, FINGER_ROWS
@@ -367,7 +389,19 @@ def _phase_rows(regions, phase):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _probe(F, tree, regions, rolls, xr, target, phase, work, cell0, cell1, st):
+def _probe(
+    F: np.ndarray,
+    tree: PointTree,
+    regions: Regions,
+    rolls: Rolls,
+    xr: np.ndarray,
+    target: np.uint64,
+    phase: int,
+    work: Work,
+    cell0: int,
+    cell1: int,
+    st: np.ndarray,
+) -> np.uint64:
     """The rolls within `target` blocked by the phase's regions at the remembered blockers: the memo, then the
     thread's cache. Inlined: most candidates end here, without a call.
 
@@ -426,7 +460,14 @@ def _probe(F, tree, regions, rolls, xr, target, phase, work, cell0, cell1, st):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _node_axes_separate(nd, box, p, yv, zv, cv):
+def _node_axes_separate(
+    nd: np.ndarray,
+    box: tuple[float, float, float, float, float, float],
+    p: tuple[float, float, float],
+    yv: tuple[float, float, float],
+    zv: tuple[float, float, float],
+    cv: tuple[float, float, float],
+) -> bool:
     """Whether one of the node's box axes v_i separates it from a region's box: box = (centre x, y, z, half
     extents x, y, z) in the grasp frame at the roll; p, yv, zv: v_i . (X, Y, Z) at the roll; cv: v_i . (node centre
     - midpoint)."""
@@ -438,22 +479,36 @@ def _node_axes_separate(nd, box, p, yv, zv, cv):
         > xh * abs(p[1]) + yh * abs(yv[1]) + zh * abs(zv[1]) + nd[N_H + 1]
     ):
         return True
-    return (
+    separate: bool = (
         abs(xm * p[2] + ym * yv[2] + zm * zv[2] - cv[2])
         > xh * abs(p[2]) + yh * abs(yv[2]) + zh * abs(zv[2]) + nd[N_H + 2]
     )
+    return separate
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _axis_dist2(nd, F):
+def _axis_dist2(nd: np.ndarray, F: np.ndarray) -> float:
     """Squared distance of a node's centre from the closing axis."""
     cx, cy, cz = nd[N_C] - F[0], nd[N_C + 1] - F[1], nd[N_C + 2] - F[2]
     x = cx * F[3] + cy * F[4] + cz * F[5]
-    return cx * cx + cy * cy + cz * cz - x * x
+    d2: float = cx * cx + cy * cy + cz * cz - x * x
+    return d2
 
 
 @njit(cache=True, error_model="numpy")
-def _walk(F, tree, regions, rolls, xr, target, phase, work, cell0, cell1, st):
+def _walk(
+    F: np.ndarray,
+    tree: PointTree,
+    regions: Regions,
+    rolls: Rolls,
+    xr: np.ndarray,
+    target: np.uint64,
+    phase: int,
+    work: Work,
+    cell0: int,
+    cell1: int,
+    st: np.ndarray,
+) -> np.uint64:
     """The rolls within `target` blocked by the phase's regions (0: fingers, 1: fixed), by a walk of the point
     tree; blockers found go into the thread's cache and memo (see _probe)."""
     X, Y, Z, nodes, leaves = tree.x, tree.y, tree.z, tree.nodes, tree.leaves
@@ -509,7 +564,7 @@ def _walk(F, tree, regions, rolls, xr, target, phase, work, cell0, cell1, st):
             x_in = x_lo >= xr[r, 0] and x_hi <= xr[r, 1]
             if x_in and dp + rho <= rows[r, RIN]:
                 return target  # the node lies where every roll of this region is
-            angular = True
+            angular: bool | np.bool = True
             if finger:
                 open_ = todo
                 if sym:
@@ -659,7 +714,18 @@ def _walk(F, tree, regions, rolls, xr, target, phase, work, cell0, cell1, st):
 
 
 @njit(cache=True, error_model="numpy")
-def _chunk(lo, hi, cands, tree, regions, rolls, hull, work, out, st):
+def _chunk(
+    lo: int,
+    hi: int,
+    cands: Candidates,
+    tree: PointTree,
+    regions: Regions,
+    rolls: Rolls,
+    hull: Hull,
+    work: Work,
+    out: np.ndarray,
+    st: np.ndarray,
+) -> None:
     """The free rolls of candidates lo..hi-1 into out (m, R) bool: a unit of _free_rolls_kernel's parallel work,
     with the thread's Work (memo, recent blockers, stack). Its own function, called from the parallel loop, which
     numba compiles far faster than the same code in the loop's body; the frame and x ranges are its own arrays."""
@@ -703,7 +769,17 @@ def _chunk(lo, hi, cands, tree, regions, rolls, hull, work, out, st):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _free_rolls_kernel(cands, tree, regions, rolls, hull, memo, nthreads, out, stats):
+def _free_rolls_kernel(
+    cands: Candidates,
+    tree: PointTree,
+    regions: Regions,
+    rolls: Rolls,
+    hull: Hull,
+    memo: Memo,
+    nthreads: int,
+    out: np.ndarray,
+    stats: np.ndarray,
+) -> None:
     """The free rolls of every candidate into out (m, R) bool, the work counters per chunk into stats (chunks, 8)."""
     m = cands.inside.shape[0]
     nchunks = (m + _CHUNK - 1) // _CHUNK
@@ -722,12 +798,12 @@ def _free_rolls_kernel(cands, tree, regions, rolls, hull, memo, nthreads, out, s
 
 #: the last few prepared point sets: the pipeline calls free_rolls in batches on the same points (the memo of
 #: blockers stays warm across the batches; it only ever holds hints)
-_PREPARED: dict = {}
+_PREPARED: dict[tuple[object, ...], Prepared] = {}
 _PREPARED_KEEP = 2
 _PREPARED_LOCK = threading.Lock()
 
 
-def _prepared(points, normals, model: CollisionModel, rolls: int) -> Prepared:
+def _prepared(points: np.ndarray, normals: np.ndarray | None, model: CollisionModel, rolls: int) -> Prepared:
     """_prepare, reused while the same points and normals (by content), model and roll count come back."""
     P = np.ascontiguousarray(points, dtype=np.float64)
     N = _normals_or_none(normals, len(P))
@@ -746,7 +822,7 @@ def _prepared(points, normals, model: CollisionModel, rolls: int) -> Prepared:
     return got
 
 
-def _normals_or_none(normals, n):
+def _normals_or_none(normals: np.ndarray | None, n: int) -> np.ndarray | None:
     """The points' normals as float64 (n, 3), or None: they only shape the tree, never the masks."""
     if normals is None:
         return None
@@ -770,7 +846,8 @@ def _prepare(P: np.ndarray, N: np.ndarray | None, model: CollisionModel, rolls: 
         P, np.zeros((0, 3)) if N is None else N, leaves, pad, _SPLIT_NORMAL_WEIGHT, _SPLIT_THICKNESS
     )
     Ps = P[perm]
-    tree = PointTree(*(np.ascontiguousarray(Ps[:, k]) for k in range(3)), nodes, leaves)
+    x, y, z = (np.ascontiguousarray(Ps[:, k]) for k in range(3))
+    tree = PointTree(x, y, z, nodes, leaves)
     # memo cells _MEMO_H leaf patches wide, at most _MEMO_CELLS of them
     lo = P.min(axis=0)
     ext = np.maximum(P.max(axis=0) - lo, 1e-12)
@@ -782,7 +859,8 @@ def _prepare(P: np.ndarray, N: np.ndarray | None, model: CollisionModel, rolls: 
         dims = np.floor(ext / h).astype(np.int64) + 1
     grid = np.array([lo[0], lo[1], lo[2], 1.0 / h, dims[0], dims[1], dims[2]], dtype=np.float64)
     # one memo per thread: shared cells that both threads keep rewriting cost more than the hits they share
-    cells = np.full((numba.config.NUMBA_NUM_THREADS, 2, int(np.prod(dims)), _MEMO_SLOTS), -1, dtype=np.int64)
+    threads = numba.config.NUMBA_NUM_THREADS  # type: ignore[attr-defined]  # numba.config sets it from the environment
+    cells = np.full((threads, 2, int(np.prod(dims)), _MEMO_SLOTS), -1, dtype=np.int64)
     regions = region_table(model, prefilter=True)
     rows = regions.rows
     fixed = rows[FINGER_ROWS:][rows[FINGER_ROWS:, MOVES] == 0.0]
@@ -790,7 +868,9 @@ def _prepare(P: np.ndarray, N: np.ndarray | None, model: CollisionModel, rolls: 
     return Prepared(tree, regions, roll_table(rolls), build_hull(P, threshold), Memo(cells, grid))
 
 
-def _run(points, normals, cands: Candidates, model: CollisionModel, rolls: int) -> tuple[np.ndarray, np.ndarray]:
+def _run(
+    points: np.ndarray, normals: np.ndarray | None, cands: Candidates, model: CollisionModel, rolls: int
+) -> tuple[np.ndarray, np.ndarray]:
     roll_table(rolls)  # checks the roll count before any work
     m = candidate_count(cands)
     if len(cands.inside) != m:
@@ -843,10 +923,22 @@ def free_rolls_of_pairs(
     return _run(points, normals, candidates_of_pairs(points, i, j, inside), model, rolls)[0]
 
 
-def free_rolls_stats(points, normals, midpoints, axes, widths, inside, model, rolls, pairs=None):
+def free_rolls_stats(
+    points: np.ndarray,
+    normals: np.ndarray | None,
+    midpoints: np.ndarray | None,
+    axes: np.ndarray | None,
+    widths: np.ndarray | None,
+    inside: np.ndarray,
+    model: CollisionModel,
+    rolls: int,
+    pairs: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[np.ndarray, dict[str, int]]:
     """free_rolls (or, with `pairs` = (i, j) and midpoints, axes, widths None, free_rolls_of_pairs) and its work
     counters (STATS), summed over candidates."""
     if pairs is None:
+        if midpoints is None or axes is None or widths is None:
+            raise ValueError("free_rolls_stats needs midpoints, axes and widths, or pairs")
         cands = candidates_of_geometry(midpoints, axes, widths, inside)
     else:
         cands = candidates_of_pairs(points, pairs[0], pairs[1], inside)

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from collections import namedtuple
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba import njit
@@ -31,6 +32,10 @@ from ..params import TOLERANCES, Tolerances
 from ._meshsolid import MeshSet
 from ._solids import BoxGripper, GripperSolids
 from ._tritree import empty_tree
+
+if TYPE_CHECKING:
+    from ._meshsolid import MeshSolid
+    from ._tritree import TriangleTree
 
 __all__ = ["Region", "CollisionModel", "collision_model", "approach_reach", "Regions", "region_table", "FINGER_ROWS"]
 
@@ -88,7 +93,7 @@ class CollisionModel:
     #: sampled point in one is in the solid) and the box regions; None: the regions themselves
     prefilter: tuple[Region, ...] | None = None
 
-    def solid_records(self) -> tuple:
+    def solid_records(self) -> tuple[TriangleTree, TriangleTree, TriangleTree]:
         """The mesh solids as the triangle kernel reads them: a tuple of three TriangleTrees (empty where none)."""
         if self.meshes is None:
             e = empty_tree()
@@ -112,7 +117,7 @@ def collision_model(
     boxes inside them."""
     solids = GripperSolids.of(gripper)
     meshes = solids.meshes
-    common = dict(
+    common: dict[str, Any] = dict(
         mode=mode,
         finger_thickness=solids.finger_thickness,
         stroke=solids.stroke,
@@ -135,7 +140,7 @@ def collision_model(
     return CollisionModel(regions=tuple(regions), meshes=meshes, prefilter=tuple(prefilter), **common)
 
 
-def _inner_regions(moves: int, solid) -> list[Region]:
+def _inner_regions(moves: int, solid: MeshSolid) -> list[Region]:
     """The point kernel's regions for a mesh finger: the boxes inside it, or one box that holds nothing (x from 1 km
     on) when it has none."""
     if solid.inner:
@@ -162,7 +167,7 @@ def region_table(model: CollisionModel, guard: float = TOLERANCES.guard, *, pref
         raise ValueError("a collision model has a region for each finger")
     fixed = [r for r in regions if r.moves == 0]
     more = [r for r in regions if r.moves != 0 and r is not first[0] and r is not first[1]]
-    for reg in [*first, *fixed, *more]:
+    for reg in [first[0], first[1], *fixed, *more]:
         ylo, yhi = reg.lo[1], reg.hi[1]
         yc, hy = (ylo + yhi) / 2, (yhi - ylo) / 2
         if reg.moves < 0:  # the -X finger is turned half a turn about Z: y -> -y
@@ -188,7 +193,7 @@ def region_table(model: CollisionModel, guard: float = TOLERANCES.guard, *, pref
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def finger_x_ranges(xr, inside, w, regions):
+def finger_x_ranges(xr: np.ndarray, inside: bool, w: float, regions: Regions) -> None:
     """The moving regions' bounds along X in the grasp frame for one candidate of closing width `w` (inside: an
     inside grasp), into xr[r, 0:2] for every row that moves: each finger's box swept over its travel from the
     pre-grasp opening to the contact, less the inner margin at the contact."""
@@ -229,7 +234,7 @@ def finger_x_ranges(xr, inside, w, regions):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def finger_travel(inside, w, regions):
+def finger_travel(inside: bool, w: float, regions: Regions) -> tuple[float, float]:
     """(s, L) of a finger for a candidate of closing width `w`: its frame lies at s from the midpoint (less the
     inner margin's clearance of the contact) at the contact end of its travel, and moves away from the part by L >= 0
     to the pre-grasp opening (0 in `paper` mode)."""
@@ -248,7 +253,7 @@ def finger_travel(inside, w, regions):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def fixed_x_ranges(xr, regions):
+def fixed_x_ranges(xr: np.ndarray, regions: Regions) -> None:
     """The fixed regions' bounds along X into xr[r, 0:2]."""
     for r in range(FINGER_ROWS, regions.rows.shape[0]):
         if regions.rows[r, MOVES] == 0.0:

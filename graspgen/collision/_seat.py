@@ -13,11 +13,16 @@ round part in a V-groove touches both flanks).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
 
 from ._tritree import COUNT, LEFT, M_C, M_H, RIGHT, START, MeshTree
+
+if TYPE_CHECKING:
+    from ._solids import GripperSolids
+    from ._tritree import TriangleTree
 
 __all__ = ["Seat", "seat_fingers", "SEAT_TOLERANCE", "seat_friction_margin_deg"]
 
@@ -42,7 +47,7 @@ class Seat:
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _ray_triangle(o0, o1, o2, eps, T, sign):
+def _ray_triangle(o0: float, o1: float, o2: float, eps: float, T: np.ndarray, sign: float) -> float:
     """The distance t >= 0 at which the ray o + t (sign, 0, 0) meets the closed triangle T (3, 3), or inf."""
     e1x, e1y, e1z = T[1, 0] - T[0, 0], T[1, 1] - T[0, 1], T[1, 2] - T[0, 2]
     e2x, e2y, e2z = T[2, 0] - T[0, 0], T[2, 1] - T[0, 1], T[2, 2] - T[0, 2]
@@ -65,7 +70,16 @@ def _ray_triangle(o0, o1, o2, eps, T, sign):
 
 
 @njit(cache=True, error_model="numpy")
-def _first_contact(A_all, NA, solid, dmax, limit, out_t, out_p, out_n):
+def _first_contact(
+    A_all: np.ndarray,
+    NA: np.ndarray,
+    solid: TriangleTree,
+    dmax: float,
+    limit: float,
+    out_t: np.ndarray,
+    out_p: np.ndarray,
+    out_n: np.ndarray,
+) -> tuple[float, int]:
     """The part's triangles A_all (n, 3, 3) (unit outward normals NA (n, 3)), in the finger's frame at the contact
     end of its travel, move along +X (the finger closes along -X) by up to dmax. Every vertex-face and edge-edge
     meeting with the finger's triangles (the TriangleTree `solid`) within that travel is found; those at a distance
@@ -166,7 +180,9 @@ def _first_contact(A_all, NA, solid, dmax, limit, out_t, out_p, out_n):
     return tmin, count
 
 
-def seat_fingers(part: MeshTree, solids, T_object_grasp: np.ndarray, width: float, margin: float) -> Seat | None:
+def seat_fingers(
+    part: MeshTree, solids: GripperSolids, T_object_grasp: np.ndarray, width: float, margin: float
+) -> Seat | None:
     """Seat both fingers of a gripper from CAD (GripperSolids with meshes) on the part at the grasp T_object_grasp
     (4, 4) of contact distance `width`: each closes from width / 2 + margin along its closing direction until it
     first meets the part's triangles (at most to the grasp's midplane). None when a finger reaches the midplane
@@ -176,6 +192,7 @@ def seat_fingers(part: MeshTree, solids, T_object_grasp: np.ndarray, width: floa
     nrm = part.normals @ R
     s0 = width / 2 + margin
     travels, points, normals = [], [], []
+    assert solids.meshes is not None  # a gripper from CAD: the pipeline seats only fingers with meshes
     for side, solid in ((-1, solids.meshes.left), (1, solids.meshes.right)):
         # the part in the finger's frame at s0: (x - s0, y, z) for +X; turned half a turn about Z for -X
         flip = np.array([side, side, 1.0])

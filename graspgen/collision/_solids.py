@@ -15,7 +15,7 @@ finger frame; the palm is a box of the grasp frame behind the fingers.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, Protocol, overload
 
 import numpy as np
 
@@ -27,17 +27,27 @@ __all__ = ["Box", "Cuboid", "GripperSolids", "BoxGripper"]
 
 class BoxGripper(Protocol):
     """What the solids read of a gripper spec (graspgen.gripper.GripperSpec; read by attribute, because gripper.py
-    builds its boxes from this package). `geometry`: the finger and body meshes (GripperGeometry), or None."""
+    builds its boxes from this package). `geometry`: the finger and body meshes (GripperGeometry), or None.
+    Read-only members, so that a frozen dataclass satisfies it."""
 
-    stroke: float
-    min_width: float
-    finger_width: float
-    finger_depth: float
-    finger_thickness: float
-    palm_depth: float
-    palm_width: float | None
-    pregrasp_clearance: float
-    geometry: Any
+    @property
+    def stroke(self) -> float: ...
+    @property
+    def min_width(self) -> float: ...
+    @property
+    def finger_width(self) -> float: ...
+    @property
+    def finger_depth(self) -> float: ...
+    @property
+    def finger_thickness(self) -> float: ...
+    @property
+    def palm_depth(self) -> float: ...
+    @property
+    def palm_width(self) -> float | None: ...
+    @property
+    def pregrasp_clearance(self) -> float: ...
+    @property
+    def geometry(self) -> Any: ...
 
 
 @dataclass(frozen=True)
@@ -67,6 +77,8 @@ class GripperSolids:
             return cls._of_meshes(spec, geometry)
         t, fw, fd = spec.finger_thickness, spec.finger_width, spec.finger_depth
         finger = Cuboid((0.0, -fw / 2, -fd / 2), (t, fw / 2, fd / 2))
+        # GripperSpec.__post_init__ fills palm_width (the finger's width when the spec leaves it out)
+        assert spec.palm_width is not None
         palm = None
         if spec.palm_depth > 0:
             half_x = spec.stroke / 2 + t
@@ -103,7 +115,11 @@ class GripperSolids:
         """The fingers' base: their lowest z (the palm's front face when there is a palm), grasp frame."""
         return min(self.finger.lo[2], self.finger_left.lo[2])
 
-    def open_width(self, width, *, inside: bool = False):
+    @overload
+    def open_width(self, width: float, *, inside: bool = False) -> float: ...
+    @overload
+    def open_width(self, width: np.ndarray, *, inside: bool = False) -> np.ndarray: ...
+    def open_width(self, width: float | np.ndarray, *, inside: bool = False) -> float | np.ndarray:
         """The pre-grasp opening for the contact distance `width` (float or array): min(width + clearance, stroke);
         for an inside grasp (the fingers open outwards onto the part) the narrower max(width - clearance, min_width
         + 2 thickness), the fingers' outer faces then."""

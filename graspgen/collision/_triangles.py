@@ -13,6 +13,7 @@ the answer is the triangle test's, so the masks are those of testing every trian
 from __future__ import annotations
 
 from collections import namedtuple
+from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
@@ -60,6 +61,11 @@ from ._tritree import (
     tri_meets_solid,
 )
 
+if TYPE_CHECKING:
+    from ._frame import Candidates, Rolls
+    from ._regions import Regions
+    from ._tritree import TriangleTree
+
 __all__ = ["mesh_free_rolls", "mesh_free_rolls_of_pairs"]
 
 #: candidates per unit of parallel work
@@ -77,13 +83,35 @@ _EXACT_TRIES = 32
 #: scratch of tri_meets_solid.
 MeshWork = namedtuple(
     "MeshWork",
-    ["F", "rx", "boxes_c", "boxes_e", "rot", "tri", "stack", "masks", "hit", "ob", "tally", "travel", "solid_tri"]
-    + ["solid_stack"],
+    [
+        "F",
+        "rx",
+        "boxes_c",
+        "boxes_e",
+        "rot",
+        "tri",
+        "stack",
+        "masks",
+        "hit",
+        "ob",
+        "tally",
+        "travel",
+        "solid_tri",
+        "solid_stack",
+    ],
 )
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _node_meets_box(nd, q, X, rot_k, cs, box, g):
+def _node_meets_box(
+    nd: np.ndarray,
+    q: tuple[float, float, float],
+    X: tuple[float, float, float],
+    rot_k: np.ndarray,
+    cs: tuple[float, float],
+    box: tuple[float, float, float, float, float, float],
+    g: float,
+) -> bool:
     """May the node's axis-aligned box meet a region's box at a roll? q = (x, y0, z0): the node's centre in the
     candidate's roll-0 frame; X: the closing axis; rot_k (6,): the roll's Y and Z in the object frame; cs = (cos,
     sin) of the roll; box = (centre x, half x, centre y, half y, centre z, half z) of the region in the roll's grasp
@@ -110,11 +138,14 @@ def _node_meets_box(nd, q, X, rot_k, cs, box, g):
         return False
     if abs(wy) > ey + bex * abs(ay) + bey * abs(Yy) + bez * abs(Zy) + g:
         return False
-    return abs(wz) <= ez + bex * abs(az) + bey * abs(Yz) + bez * abs(Zz) + g
+    meets: bool = abs(wz) <= ez + bex * abs(az) + bey * abs(Yz) + bez * abs(Zz) + g
+    return meets
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _obb_meets_box(ob, cs, box, g):
+def _obb_meets_box(
+    ob: np.ndarray, cs: tuple[float, float], box: tuple[float, float, float, float, float, float], g: float
+) -> bool:
     """May the node's oriented box meet a region's box at a roll? ob: the node's oriented box in the candidate's
     roll-0 frame (centre x, y0, z0, then per box axis i its components along X, Y0, Z0 and its half extent:
     ob[3 + 4 i : 7 + 4 i]); cs, box as for _node_meets_box. Separating axes: the region's Y and Z and the box's own
@@ -134,11 +165,12 @@ def _obb_meets_box(ob, cs, box, g):
         sz += e * abs(uZ)
         if abs(dX * pX + dY * uY + dZ * uZ) > e + bex * abs(pX) + bey * abs(uY) + bez * abs(uZ) + g:
             return False
-    return abs(dY) <= bey + sy + g and abs(dZ) <= bez + sz + g
+    meets: bool = abs(dY) <= bey + sy + g and abs(dZ) <= bez + sz + g
+    return meets
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _oriented_in_frame(nd, F, ob):
+def _oriented_in_frame(nd: np.ndarray, F: np.ndarray, ob: np.ndarray) -> None:
     """The node's oriented box in the candidate's roll-0 frame (F: midpoint, X, Y0, Z0) into ob (_obb_meets_box)."""
     qx, qy, qz = nd[M_OC] - F[0], nd[M_OC + 1] - F[1], nd[M_OC + 2] - F[2]
     ob[0] = qx * F[3] + qy * F[4] + qz * F[5]
@@ -153,7 +185,7 @@ def _oriented_in_frame(nd, F, ob):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _vertex_x_range(verts, q0, q1, F):
+def _vertex_x_range(verts: np.ndarray, q0: int, q1: int, F: np.ndarray) -> tuple[float, float]:
     """The smallest and largest coordinate along the closing axis of verts[:, q0:q1], with the triangle loop's own
     arithmetic (_walk)."""
     lo = np.inf
@@ -166,7 +198,9 @@ def _vertex_x_range(verts, q0, q1, F):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _meets_finger_slab(masks, top, blocked, rx, x_lo, x_hi):
+def _meets_finger_slab(
+    masks: np.ndarray, top: int, blocked: np.uint64, rx: np.ndarray, x_lo: float, x_hi: float
+) -> bool:
     """Does [x_lo, x_hi] meet the slab of a finger region (rows 0 and 1) that still has rolls to test at stack
     entry `top`?"""
     for r in range(FINGER_ROWS):  # noqa: SIM110 (numba compiles no generator passed to any())
@@ -176,7 +210,15 @@ def _meets_finger_slab(masks, top, blocked, rx, x_lo, x_hi):
 
 
 @njit(cache=True, error_model="numpy")
-def _walk(todo, tree, regions, rolls, solids, g, work):
+def _walk(
+    todo: np.uint64,
+    tree: TriangleTree,
+    regions: Regions,
+    rolls: Rolls,
+    solids: tuple[TriangleTree, TriangleTree, TriangleTree] | None,
+    g: float,
+    work: MeshWork,
+) -> np.uint64:
     """The rolls of `todo` at which some triangle meets some region, for the candidate in work.F (midpoint, X, Y0,
     Z0) with its regions in work.rx, work.boxes_c, work.boxes_e: one walk of the tree carrying, per region, the rolls
     still to test. A region of a mesh solid (column SOLID: its index in `solids`) is the solid's bounding box for the
@@ -328,7 +370,7 @@ def _walk(todo, tree, regions, rolls, solids, g, work):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def region_boxes(regions, rx, boxes_c, boxes_e):
+def region_boxes(regions: Regions, rx: np.ndarray, boxes_c: np.ndarray, boxes_e: np.ndarray) -> None:
     """The regions' boxes in a roll's grasp frame for one candidate, from their bounds along X in rx (r, 2):
     centres and half extents into boxes_c, boxes_e (r, 3)."""
     rows = regions.rows
@@ -342,7 +384,17 @@ def region_boxes(regions, rx, boxes_c, boxes_e):
 
 
 @njit(cache=True, error_model="numpy")
-def _mesh_thread(t, nthreads, cands, free, tree, regions, rolls, solids, g):
+def _mesh_thread(
+    t: int,
+    nthreads: int,
+    cands: Candidates,
+    free: np.ndarray,
+    tree: TriangleTree,
+    regions: Regions,
+    rolls: Rolls,
+    solids: tuple[TriangleTree, TriangleTree, TriangleTree] | None,
+    g: float,
+) -> None:
     """Thread t's share of the mesh-exact check: chunks t, t + nthreads, ... of the candidates (the work varies
     along the candidates' spatial order, and a static split into one run per thread leaves one thread with most of
     it). Clears in free (n, R) bool every roll at which some triangle of the tree meets some region; `solids`: the
@@ -397,14 +449,27 @@ def _mesh_thread(t, nthreads, cands, free, tree, regions, rolls, solids, g):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _mesh_kernel(cands, free, tree, regions, rolls, g, nthreads):
+def _mesh_kernel(
+    cands: Candidates, free: np.ndarray, tree: TriangleTree, regions: Regions, rolls: Rolls, g: float, nthreads: int
+) -> None:
     """The mesh-exact check of a gripper of boxes, over nthreads threads."""
     for t in prange(nthreads):
         _mesh_thread(t, nthreads, cands, free, tree, regions, rolls, None, g)
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _mesh_kernel_solids(cands, free, tree, regions, rolls, left, right, body, g, nthreads):
+def _mesh_kernel_solids(
+    cands: Candidates,
+    free: np.ndarray,
+    tree: TriangleTree,
+    regions: Regions,
+    rolls: Rolls,
+    left: TriangleTree,
+    right: TriangleTree,
+    body: TriangleTree,
+    g: float,
+    nthreads: int,
+) -> None:
     """The mesh-exact check of a gripper from CAD (its solids left, right, body: TriangleTrees), over nthreads
     threads (numba's parallel loops take flat records: the solids' tuple is made inside)."""
     for t in prange(nthreads):
@@ -445,7 +510,9 @@ def mesh_free_rolls_of_pairs(
     return _run(tree, candidates_of_pairs(points, i, j, inside), free, model, switch)
 
 
-def _run(tree: MeshTree, cands, free, model: CollisionModel, switch: float | None) -> np.ndarray:
+def _run(
+    tree: MeshTree, cands: Candidates, free: np.ndarray, model: CollisionModel, switch: float | None
+) -> np.ndarray:
     free = np.ascontiguousarray(free, dtype=bool)
     n, R = free.shape
     if candidate_count(cands) != n or len(cands.inside) != n:

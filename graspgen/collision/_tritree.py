@@ -55,7 +55,7 @@ class MeshTree:
         children: np.ndarray,
         vstart: np.ndarray,
         verts: np.ndarray,
-    ):
+    ) -> None:
         self.triangles = triangles
         self.normals = normals
         self.nodes = nodes
@@ -95,7 +95,9 @@ def build_tree(vertices: np.ndarray, faces: np.ndarray) -> MeshTree:
 
 
 @njit(cache=True)
-def _node_vertices(faces, V, children, max_triangles):
+def _node_vertices(
+    faces: np.ndarray, V: np.ndarray, children: np.ndarray, max_triangles: int
+) -> tuple[np.ndarray, np.ndarray]:
     """The distinct vertices (by index) of each node of at most `max_triangles` triangles, in (3, total) SoA with
     offsets per node: a stamp per vertex index marks the ones a node has listed already."""
     nn = children.shape[0]
@@ -127,7 +129,7 @@ def _node_vertices(faces, V, children, max_triangles):
 
 
 @njit(cache=True)
-def _build(T, order, nodes, children):
+def _build(T: np.ndarray, order: np.ndarray, nodes: np.ndarray, children: np.ndarray) -> int:
     """Fill nodes[k] (columns M_*) and children[k] = (left, right, start, count) by median splits of the triangles'
     centroids along the longest axis of their extent, at most LEAF triangles per leaf; leaves have left = -1.
     Returns the node count. The oriented box suits the long thin triangles of curved walls (an arc's axis-aligned
@@ -193,7 +195,7 @@ def _build(T, order, nodes, children):
 
 
 @njit(cache=True)
-def _oriented_box(T, order, a0, b0, out):
+def _oriented_box(T: np.ndarray, order: np.ndarray, a0: int, b0: int, out: np.ndarray) -> None:
     """The oriented box of the vertices of triangles T[order[a0:b0]] into out[M_OC:] (see _build): axes by principal
     components, bounds by projection."""
     cnt = 3 * (b0 - a0)
@@ -247,7 +249,16 @@ def normal_spread_rad(tree: MeshTree, points: np.ndarray, normals: np.ndarray, t
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _spread_kernel(P, N, T, TN, nodes, children, tol, out):
+def _spread_kernel(
+    P: np.ndarray,
+    N: np.ndarray,
+    T: np.ndarray,
+    TN: np.ndarray,
+    nodes: np.ndarray,
+    children: np.ndarray,
+    tol: float,
+    out: np.ndarray,
+) -> None:
     for i in prange(P.shape[0]):
         px, py, pz = P[i, 0], P[i, 1], P[i, 2]
         lowest = 1.0
@@ -278,7 +289,7 @@ def _spread_kernel(P, N, T, TN, nodes, children, tol, out):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _point_triangle_dist2(px, py, pz, T, t):
+def _point_triangle_dist2(px: float, py: float, pz: float, T: np.ndarray, t: int) -> float:
     """Squared distance from p to triangle t (Ericson, Real-Time Collision Detection 5.1.5)."""
     ax, ay, az = T[t, 0, 0], T[t, 0, 1], T[t, 0, 2]
     bx, by, bz = T[t, 1, 0], T[t, 1, 1], T[t, 1, 2]
@@ -318,19 +329,20 @@ def _point_triangle_dist2(px, py, pz, T, t):
             v = vb * denom
             w = vc * denom
             qx, qy, qz = ax + abx * v + acx * w, ay + aby * v + acy * w, az + abz * v + acz * w
-    return (px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2
+    dist2: float = (px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2
+    return dist2
 
 
 # -- regions against triangles ---------------------------------------------------------------------------------------
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _axis_test(p0, p1, p2, r):
+def _axis_test(p0: float, p1: float, p2: float, r: float) -> bool:
     return min(p0, p1, p2) > r or max(p0, p1, p2) < -r
 
 
 @njit(cache=True, error_model="numpy")
-def tri_box(v, c, e):
+def tri_box(v: np.ndarray, c: np.ndarray, e: np.ndarray) -> bool:
     """Does the triangle v (3, 3) meet the closed axis-aligned box with centre c (3,) and half extents e (3,)?
     (Akenine-Moeller's separating-axis test: the box's 3 axes, the triangle's normal, 9 edge cross products.)"""
     x0, y0, z0 = v[0, 0] - c[0], v[0, 1] - c[1], v[0, 2] - c[2]
@@ -369,14 +381,15 @@ def tri_box(v, c, e):
     nz = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
     d = nx * x0 + ny * y0 + nz * z0
     r = ex * abs(nx) + ey * abs(ny) + ez * abs(nz)
-    return abs(d) <= r
+    meets: bool = abs(d) <= r
+    return meets
 
 
 # -- a part's triangle against a mesh solid, swept along X -------------------------------------------------------
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _separates(A, L, B, dx, dy, dz, g):
+def _separates(A: np.ndarray, L: float, B: np.ndarray, dx: float, dy: float, dz: float, g: float) -> bool:
     """Does the axis d separate the prism conv(A, A - L X) from the triangle B by more than g |d|?"""
     a0 = A[0, 0] * dx + A[0, 1] * dy + A[0, 2] * dz
     a1 = A[1, 0] * dx + A[1, 1] * dy + A[1, 2] * dz
@@ -389,11 +402,12 @@ def _separates(A, L, B, dx, dy, dz, g):
     b2 = B[2, 0] * dx + B[2, 1] * dy + B[2, 2] * dz
     b_lo, b_hi = min(b0, b1, b2), max(b0, b1, b2)
     tol = g * np.sqrt(dx * dx + dy * dy + dz * dz)
-    return p_hi < b_lo - tol or b_hi < p_lo - tol
+    apart: bool = p_hi < b_lo - tol or b_hi < p_lo - tol
+    return apart
 
 
 @njit(cache=True, error_model="numpy")
-def prism_meets_triangle(A, L, B, g):
+def prism_meets_triangle(A: np.ndarray, L: float, B: np.ndarray, g: float) -> bool:
     """Does the prism conv(A, A - L X) (A (3, 3), L >= 0: the triangle swept along -X) meet the triangle B (3, 3),
     closed, within the guard band g? The separating-axis test over both shapes' face normals (A's normal, the
     prism's side faces e_A x X, B's normal and its in-plane edge normals, A's in-plane edge normals and n_A x X for a
@@ -455,7 +469,16 @@ def prism_meets_triangle(A, L, B, g):
 
 
 @njit(cache=True, error_model="numpy")
-def tri_meets_solid(w, solid, side, s, L, g, A, stack):
+def tri_meets_solid(
+    w: np.ndarray,
+    solid: TriangleTree,
+    side: int,
+    s: float,
+    L: float,
+    g: float,
+    A: np.ndarray,
+    stack: np.ndarray,
+) -> bool:
     """Does the part's triangle w (3, 3), in a roll's grasp frame, meet the mesh solid (a TriangleTree in its own
     frame) anywhere on the solid's travel? side +1: the +X finger, its frame at (s, 0, 0) at the contact end of the
     travel and moving outwards by L; side -1: the -X finger, at (-s, 0, 0) turned half a turn about Z; side 0: a
