@@ -212,25 +212,24 @@ def finger_x_ranges(xr: np.ndarray, inside: bool, w: float, regions: Regions) ->
         o = max(w - clearance, min_width + 2 * t)
         a, b = min(o, w) / 2, w / 2 - margin
     for r in range(FINGER_ROWS):
-        if not inside:
-            lo, hi = a + rows[r, X0], b + rows[r, X1]
-        else:
-            lo, hi = a - rows[r, X1], b - rows[r, X0]
-        if rows[r, MOVES] < 0:
-            xr[r, 0], xr[r, 1] = -hi, -lo
-        else:
-            xr[r, 0], xr[r, 1] = lo, hi
+        _swept_x_range(xr, rows, r, inside, a, b)
     for r in range(FINGER_ROWS, rows.shape[0]):  # further boxes inside CAD fingers
-        if rows[r, MOVES] == 0.0:
-            continue
-        if not inside:
-            lo, hi = a + rows[r, X0], b + rows[r, X1]
-        else:
-            lo, hi = a - rows[r, X1], b - rows[r, X0]
-        if rows[r, MOVES] < 0:
-            xr[r, 0], xr[r, 1] = -hi, -lo
-        else:
-            xr[r, 0], xr[r, 1] = lo, hi
+        if rows[r, MOVES] != 0.0:
+            _swept_x_range(xr, rows, r, inside, a, b)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _swept_x_range(xr: np.ndarray, rows: np.ndarray, r: int, inside: bool, a: float, b: float) -> None:
+    """Row r's box swept with its finger from a to b (its frame's distance from the midpoint at either end of the
+    travel), into xr[r]: mirrored for the -X finger; for an inside grasp the finger is turned to face outwards."""
+    if not inside:
+        lo, hi = a + rows[r, X0], b + rows[r, X1]
+    else:
+        lo, hi = a - rows[r, X1], b - rows[r, X0]
+    if rows[r, MOVES] < 0:
+        xr[r, 0], xr[r, 1] = -hi, -lo
+    else:
+        xr[r, 0], xr[r, 1] = lo, hi
 
 
 @njit(cache=True, inline="always", error_model="numpy")

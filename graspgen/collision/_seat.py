@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from ._tritree import COUNT, LEFT, M_C, M_H, RIGHT, START, MeshTree
+from ._tritree import COUNT, LEFT, RIGHT, START, MeshTree, node_misses_box
 
 if TYPE_CHECKING:
     from ._solids import GripperSolids
@@ -101,14 +101,7 @@ def _first_contact(
         while top > 0:
             top -= 1
             k = stack[top]
-            if (
-                nodes[k, M_C] + nodes[k, M_H] < lo0
-                or nodes[k, M_C] - nodes[k, M_H] > hi0
-                or nodes[k, M_C + 1] + nodes[k, M_H + 1] < lo1
-                or nodes[k, M_C + 1] - nodes[k, M_H + 1] > hi1
-                or nodes[k, M_C + 2] + nodes[k, M_H + 2] < lo2
-                or nodes[k, M_C + 2] - nodes[k, M_H + 2] > hi2
-            ):
+            if node_misses_box(nodes, k, (lo0, lo1, lo2), (hi0, hi1, hi2)):
                 continue
             if children[k, LEFT] >= 0:
                 stack[top] = children[k, LEFT]

@@ -23,6 +23,7 @@ __all__ = [
     "tri_box",
     "prism_meets_triangle",
     "tri_meets_solid",
+    "node_misses_box",
 ]
 
 LEAF = 4
@@ -389,6 +390,19 @@ def tri_box(v: np.ndarray, c: np.ndarray, e: np.ndarray) -> bool:
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def node_misses_box(nodes: np.ndarray, k: int, lo: tuple[float, float, float], hi: tuple[float, float, float]) -> bool:
+    """Does node k's axis-aligned box lie wholly outside the box [lo, hi] (closed)?"""
+    return bool(
+        nodes[k, M_C] + nodes[k, M_H] < lo[0]
+        or nodes[k, M_C] - nodes[k, M_H] > hi[0]
+        or nodes[k, M_C + 1] + nodes[k, M_H + 1] < lo[1]
+        or nodes[k, M_C + 1] - nodes[k, M_H + 1] > hi[1]
+        or nodes[k, M_C + 2] + nodes[k, M_H + 2] < lo[2]
+        or nodes[k, M_C + 2] - nodes[k, M_H + 2] > hi[2]
+    )
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def _separates(A: np.ndarray, L: float, B: np.ndarray, dx: float, dy: float, dz: float, g: float) -> bool:
     """Does the axis d separate the prism conv(A, A - L X) from the triangle B by more than g |d|?"""
     a0 = A[0, 0] * dx + A[0, 1] * dy + A[0, 2] * dz
@@ -502,14 +516,7 @@ def tri_meets_solid(
     while top > 0:
         top -= 1
         k = stack[top]
-        if (
-            nodes[k, M_C] + nodes[k, M_H] < lo0
-            or nodes[k, M_C] - nodes[k, M_H] > hi0
-            or nodes[k, M_C + 1] + nodes[k, M_H + 1] < lo1
-            or nodes[k, M_C + 1] - nodes[k, M_H + 1] > hi1
-            or nodes[k, M_C + 2] + nodes[k, M_H + 2] < lo2
-            or nodes[k, M_C + 2] - nodes[k, M_H + 2] > hi2
-        ):
+        if node_misses_box(nodes, k, (lo0, lo1, lo2), (hi0, hi1, hi2)):
             continue
         if children[k, LEFT] < 0:
             for t in range(children[k, START], children[k, START] + children[k, COUNT]):
