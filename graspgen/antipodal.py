@@ -16,6 +16,7 @@ cos(half - spread), judged in the same pass.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 from dataclasses import dataclass
 from typing import cast
 
@@ -82,22 +83,26 @@ def _grid(points: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np.n
     return order, cell_start, dims.astype(np.int64), origin
 
 
+#: The points in the kernel's grid order: coordinates x, y, z (n,) and normals nx, ny, nz (n,), metres; c2 (n,) the
+#: cos^2 of each point's friction cone within the position tolerance.
+PairSurface = namedtuple("PairSurface", ["x", "y", "z", "nx", "ny", "nz", "c2"])
+#: The spatial grid the pairs are searched in: cell_start (cells + 1,) offsets into the points, dims (3,), origin
+#: (3,), cell size (m) and reach (cells searched on each side).
+PairGrid = namedtuple("PairGrid", ["cell_start", "dims", "origin", "cell", "reach"])
+#: What a pair must satisfy: lims (7,) = squared distance bounds (all, outside, inside grasps) and cos^2 of the
+#: cone; inside_ok: inside grasps are wanted.
+PairRule = namedtuple("PairRule", ["lims", "inside_ok"])
+#: Where the kernel writes: fill (False: count only), offsets (n + 1,) of each row's pairs, out_j, out_inside (the
+#: pairs of a block), counters (n, 4) per row (counting pass).
+PairOut = namedtuple("PairOut", ["fill", "offsets", "out_j", "out_inside", "counters"])
+
+
 @njit(cache=True, inline="always", error_model="numpy")
-def _judge(
-    X: np.ndarray,
-    Y: np.ndarray,
-    Z: np.ndarray,
-    NX: np.ndarray,
-    NY: np.ndarray,
-    NZ: np.ndarray,
-    C2: np.ndarray,
-    i: int | np.int64,
-    j: int,
-    lims: np.ndarray,
-    inside_ok: bool,
-) -> tuple[bool, bool, bool, bool, bool]:
+def _judge(s: PairSurface, i: int | np.int64, j: int, rule: PairRule) -> tuple[bool, bool, bool, bool, bool]:
     """(accepted, bad orientation, passes (a) and (b), inside, passes (c) without the tolerance) for the pair
     (i, j); branch-free. C2: per point, cos^2 of its cone within the position tolerance (cos2 where no spread)."""
+    X, Y, Z, NX, NY, NZ, C2 = s.x, s.y, s.z, s.nx, s.ny, s.nz, s.c2
+    lims, inside_ok = rule.lims, rule.inside_ok
     lo2, hi2, out_lo2, out_hi2, in_lo2, in_hi2, cos2 = lims[0], lims[1], lims[2], lims[3], lims[4], lims[5], lims[6]
     dx = X[j] - X[i]
     dy = Y[j] - Y[i]
@@ -120,27 +125,14 @@ def _judge(
 
 
 @njit(cache=True, error_model="numpy")
-def _count_run(
-    X: np.ndarray,
-    Y: np.ndarray,
-    Z: np.ndarray,
-    NX: np.ndarray,
-    NY: np.ndarray,
-    NZ: np.ndarray,
-    C2: np.ndarray,
-    i: int | np.int64,
-    start: int,
-    stop: int,
-    lims: np.ndarray,
-    inside_ok: bool,
-) -> tuple[int, int, int, int]:
+def _count_run(s: PairSurface, i: int | np.int64, start: int, stop: int, rule: PairRule) -> tuple[int, int, int, int]:
     # no stores in this loop, so that it vectorises
     n_acc = 0
     n_bad = 0
     n_ab = 0
     n_c = 0
     for j in range(start, stop):
-        acc, bad, ab, _, acc_c = _judge(X, Y, Z, NX, NY, NZ, C2, i, j, lims, inside_ok)
+        acc, bad, ab, _, acc_c = _judge(s, i, j, rule)
         n_acc += acc
         n_bad += bad
         n_ab += ab
@@ -150,22 +142,7 @@ def _count_run(
 
 @njit(cache=True, error_model="numpy")
 def _fill_run(
-    X: np.ndarray,
-    Y: np.ndarray,
-    Z: np.ndarray,
-    NX: np.ndarray,
-    NY: np.ndarray,
-    NZ: np.ndarray,
-    C2: np.ndarray,
-    i: int | np.int64,
-    start: int,
-    stop: int,
-    lims: np.ndarray,
-    inside_ok: bool,
-    out_j: np.ndarray,
-    out_inside: np.ndarray,
-    pos: int,
-    end: int,
+    s: PairSurface, i: int | np.int64, start: int, stop: int, rule: PairRule, out: PairOut, pos: int, end: int
 ) -> int:
     # 64 pairs at a time: their verdicts packed into a word by a branch-free (vectorised) loop, then the few
     # accepted ones (~3 %) stored in order. The row's count is known from the counting pass: stop at `end`
@@ -175,99 +152,39 @@ def _fill_run(
         acc_w = np.uint64(0)
         ins_w = np.uint64(0)
         for t in range(min(64, stop - b0)):
-            acc, _, _, ins, _ = _judge(X, Y, Z, NX, NY, NZ, C2, i, b0 + t, lims, inside_ok)
+            acc, _, _, ins, _ = _judge(s, i, b0 + t, rule)
             acc_w |= np.uint64(acc) << np.uint64(t)
             ins_w |= np.uint64(ins) << np.uint64(t)
         while acc_w:
             low = acc_w & (~acc_w + np.uint64(1))
-            out_j[pos] = b0 + np.int64(popcount(low - np.uint64(1)))
-            out_inside[pos] = (ins_w & low) != np.uint64(0)
+            out.out_j[pos] = b0 + np.int64(popcount(low - np.uint64(1)))
+            out.out_inside[pos] = (ins_w & low) != np.uint64(0)
             pos += 1
             acc_w ^= low
     return pos
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _pairs_kernel(
-    X: np.ndarray,
-    Y: np.ndarray,
-    Z: np.ndarray,
-    NX: np.ndarray,
-    NY: np.ndarray,
-    NZ: np.ndarray,
-    C2: np.ndarray,
-    cell_start: np.ndarray,
-    dims: np.ndarray,
-    origin: np.ndarray,
-    cell: float,
-    reach: int,
-    lims: np.ndarray,
-    inside_ok: bool,
-    fill: bool,
-    offsets: np.ndarray,
-    out_j: np.ndarray,
-    out_inside: np.ndarray,
-    counters: np.ndarray,
-    r0: int,
-    r1: int,
-) -> None:
-    # rows r0 <= i < r1; row i has n - 1 - i partners: pairing row r0 + k with row r1 - 1 - k balances the threads
+def _pairs_kernel(s: PairSurface, grid: PairGrid, rule: PairRule, out: PairOut, r0: int, r1: int) -> None:
+    """Criteria (a)-(c) for the pairs (i, j > i) of rows r0 <= i < r1 within the grid's reach: counted per row into
+    out.counters, or (out.fill) written into out.out_j and out.out_inside at the rows' offsets."""
+    # row i has n - 1 - i partners: pairing row r0 + k with row r1 - 1 - k balances the threads
     for k in prange((r1 - r0 + 1) // 2):
         for side in range(2):
             kk = np.int64(k)  # prange indices are unsigned: keep the row index signed
             i = r0 + kk if side == 0 else r1 - 1 - kk
             if side == 1 and i == r0 + kk:
                 break
-            _pairs_row(
-                X,
-                Y,
-                Z,
-                NX,
-                NY,
-                NZ,
-                C2,
-                cell_start,
-                dims,
-                origin,
-                cell,
-                reach,
-                lims,
-                inside_ok,
-                fill,
-                offsets,
-                out_j,
-                out_inside,
-                counters,
-                i,
-                offsets[r0] if fill else 0,
-            )
+            _pairs_row(s, grid, rule, out, i, out.offsets[r0] if out.fill else 0)
 
 
 @njit(cache=True, error_model="numpy")
-def _pairs_row(
-    X: np.ndarray,
-    Y: np.ndarray,
-    Z: np.ndarray,
-    NX: np.ndarray,
-    NY: np.ndarray,
-    NZ: np.ndarray,
-    C2: np.ndarray,
-    cell_start: np.ndarray,
-    dims: np.ndarray,
-    origin: np.ndarray,
-    cell: float,
-    reach: int,
-    lims: np.ndarray,
-    inside_ok: bool,
-    fill: bool,
-    offsets: np.ndarray,
-    out_j: np.ndarray,
-    out_inside: np.ndarray,
-    counters: np.ndarray,
-    i: int | np.int64,
-    base: int,
-) -> None:
-    xi, yi, zi = X[i], Y[i], Z[i]
+def _pairs_row(s: PairSurface, grid: PairGrid, rule: PairRule, out: PairOut, i: int | np.int64, base: int) -> None:
+    """Row i of _pairs_kernel: the grid cells within reach of point i, one contiguous run of points per (x, y)
+    column of cells; `base`: the block's first offset (fill)."""
+    cell_start, dims, origin, cell, reach = grid.cell_start, grid.dims, grid.origin, grid.cell, grid.reach
+    fill, offsets, counters = out.fill, out.offsets, out.counters
+    xi, yi, zi = s.x[i], s.y[i], s.z[i]
     ci = min(max(int((xi - origin[0]) / cell), 0), dims[0] - 1)
     cj = min(max(int((yi - origin[1]) / cell), 0), dims[1] - 1)
     ck = min(max(int((zi - origin[2]) / cell), 0), dims[2] - 1)
@@ -284,9 +201,9 @@ def _pairs_row(
             start = max(cell_start[col + max(ck - reach, 0)], i + 1)
             stop = cell_start[col + min(ck + reach + 1, dims[2])]
             if fill:
-                pos = _fill_run(X, Y, Z, NX, NY, NZ, C2, i, start, stop, lims, inside_ok, out_j, out_inside, pos, end)
+                pos = _fill_run(s, i, start, stop, rule, out, pos, end)
             else:
-                c0, c1, c2, c3 = _count_run(X, Y, Z, NX, NY, NZ, C2, i, start, stop, lims, inside_ok)
+                c0, c1, c2, c3 = _count_run(s, i, start, stop, rule)
                 n_acc += c0
                 n_bad_orient += c1
                 n_pass_ab += c2
@@ -367,9 +284,12 @@ class PairPlan:
         )
         lims = np.array([lo * lo, hi * hi, out_lo**2, out_hi**2, in_lo**2, in_hi**2, cos2])
         c2 = _cone_cos2(half, cos2, spread, order, n)
-        self._args = (*soa, c2, cell_start, dims, origin, cell, 2, lims, bool(inside))
+        self._surface = PairSurface(*soa, c2)
+        self._grid = PairGrid(cell_start, dims, origin, cell, 2)
+        self._rule = PairRule(lims, bool(inside))
         counters = np.zeros((n, 4), dtype=np.int64)
-        _pairs_kernel(*self._args, False, self.offsets, np.zeros(0, np.int64), np.zeros(0, np.bool_), counters, 0, n)
+        count = PairOut(False, self.offsets, np.zeros(0, np.int64), np.zeros(0, np.bool_), counters)
+        _pairs_kernel(self._surface, self._grid, self._rule, count, 0, n)
         np.cumsum(counters[:, 0], out=self.offsets[1:])
         m = int(self.offsets[-1])
         passed_ab, passed_c = int(counters[:, 2].sum()), int(counters[:, 3].sum())
@@ -407,8 +327,8 @@ class PairPlan:
             return e, e.copy(), np.zeros(0, dtype=np.bool_)
         out_j = np.empty(m, dtype=np.int64)
         out_inside = np.empty(m, dtype=np.bool_)
-        counters = np.zeros((0, 3), dtype=np.int64)
-        _pairs_kernel(*self._args, True, self.offsets, out_j, out_inside, counters, r0, r1)
+        fill = PairOut(True, self.offsets, out_j, out_inside, np.zeros((0, 4), dtype=np.int64))
+        _pairs_kernel(self._surface, self._grid, self._rule, fill, r0, r1)
         out_i = np.repeat(np.arange(r0, r1, dtype=np.int64), np.diff(self.offsets[r0 : r1 + 1]))
         if self.identity:
             return out_i, out_j, out_inside

@@ -37,6 +37,7 @@ contact spreads a little on a pad.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -305,23 +306,12 @@ def _margins(
     if len(i) == 0:
         return out
     nrm = np.zeros((0, 3)) if normals is None else np.ascontiguousarray(normals, dtype=np.float64)
-    _margins_kernel(
-        P,
-        nrm,
-        np.ascontiguousarray(rho, dtype=np.float64),
-        i,
-        j,
-        com,
-        float(load),
-        float(friction),
-        float(friction) * float(grip_force),
-        _quarter_sphere(model.directions),
-        int(model.bisection_steps),
-        int(model.refinements),
-        float(model.max_margin),
-        float(floor),
-        out,
+    part = HoldPart(P, nrm, np.ascontiguousarray(rho, dtype=np.float64), com)
+    search = HoldSearch(
+        _quarter_sphere(model.directions), int(model.bisection_steps), int(model.refinements), float(model.max_margin)
     )
+    grip = (float(load), float(friction), float(friction) * float(grip_force), float(floor))
+    _margins_kernel(part, i, j, grip, search, out)
     return out
 
 
@@ -423,24 +413,27 @@ def _neighbour(
     return vx / lv, vy / lv, vz / lv
 
 
+#: The part as the margin kernel reads it: points (n, 3) metres, normals (n, 3) unit (no rows: both contacts on the
+#: closing axis), rho (n,) torsion radii, com (3,) the centre of mass.
+HoldPart = namedtuple("HoldPart", ["points", "normals", "rho", "com"])
+#: The search over load directions: dirs (K, 3) the lattice, bisection steps, refinement rounds, the largest margin
+#: reported.
+HoldSearch = namedtuple("HoldSearch", ["dirs", "steps", "refinements", "max_margin"])
+
+
 @njit(parallel=True, cache=True, error_model="numpy")
 def _margins_kernel(
-    P: np.ndarray,
-    Nrm: np.ndarray,
-    rho: np.ndarray,
+    part: HoldPart,
     I: np.ndarray,
     J: np.ndarray,
-    com: np.ndarray,
-    W: float,
-    mu: float,
-    cap: float,
-    dirs: np.ndarray,
-    steps: int,
-    refinements: int,
-    max_margin: float,
-    floor: float,
+    grip: tuple[float, float, float, float],
+    search: HoldSearch,
     out: np.ndarray,
 ) -> None:
+    """The hold margin of every candidate (P[I[n]], P[J[n]]) into out (N,); grip = (the load W, mu, mu F, the floor
+    below which a margin need not be exact)."""
+    W, mu, cap, floor = grip
+    dirs, steps, refinements, max_margin = search.dirs, search.steps, search.refinements, search.max_margin
     K = dirs.shape[0]
     dirsT = np.ascontiguousarray(dirs.T)
     # refinement: around the worst direction, 8 neighbours at 1/2, 1/4, ... of the lattice spacing
@@ -454,33 +447,31 @@ def _margins_kernel(
     for ch in prange(chunks):
         co = np.empty((4, max(K, 8)))
         for n in range(ch * _CHUNK, min(N, (ch + 1) * _CHUNK)):
-            out[n] = _margin_one(P, Nrm, I[n], J[n], rho, com, dirsT, co, ring_c, ring_s, steps, refinements, run)
+            out[n] = _margin_one(part, I[n], J[n], dirsT, (co, ring_c, ring_s), (steps, refinements), run)
 
 
 @njit(cache=True, error_model="numpy")
 def _margin_one(
-    P: np.ndarray,
-    Nrm: np.ndarray,
+    part: HoldPart,
     ia: int,
     ib: int,
-    rho: np.ndarray,
-    com: np.ndarray,
     dirs: np.ndarray,
-    co: np.ndarray,
-    ring_c: np.ndarray,
-    ring_s: np.ndarray,
-    steps: int,
-    refinements: int,
+    work: tuple[np.ndarray, np.ndarray, np.ndarray],
+    rounds: tuple[int, int],
     run: tuple[float, float, float, float, float, float, float, float],
 ) -> float:
-    """The margin of the candidate (P[ia], P[ib]) with the points' normals Nrm (none: both on the closing axis) and
-    torsion radii rho; `dirs` (3, K): the lattice's directions as columns; `co` (4, >= max(K, 8)): work rows of
-    a0, a1, b and the lower bound per direction; `run`: the load W, mu F, W / (mu F), max_margin, floor, the
-    lattice spacing, atan(mu) and its tangent (the same for every candidate).
+    """The margin of the candidate (P[ia], P[ib]) of `part` (its normals Nrm, none: both on the closing axis, and
+    torsion radii rho); `dirs` (3, K): the lattice's directions as columns; work = (co, ring_c, ring_s): co (4,
+    >= max(K, 8)) work rows of a0, a1, b and the lower bound per direction, ring_c, ring_s (8,) the cosines and
+    sines of a refinement's 8 neighbours; rounds = (bisection steps, refinements); `run`: the load W, mu F,
+    W / (mu F), max_margin, floor, the lattice spacing, atan(mu) and its tangent (the same for every candidate).
 
     The coefficients of all directions (the lattice's, then each refinement's 8) come first in a loop without
     branches, which the compiler vectorises; the limit scales follow in order (the root finding branches)."""
     W, cap, w_cap, max_margin, floor, spacing, phi, tan_phi = run
+    P, Nrm, rho, com = part.points, part.normals, part.rho, part.com
+    co, ring_c, ring_s = work
+    steps, refinements = rounds
     K = dirs.shape[1]
     ax = P[ib, 0] - P[ia, 0]
     ay = P[ib, 1] - P[ia, 1]
