@@ -12,6 +12,7 @@ round part in a V-groove touches both flanks).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -256,7 +257,7 @@ def seat_friction_margin_deg(seat: Seat, axis: np.ndarray, half_angle_deg: float
 
 def _angle_deg(u: np.ndarray, v: np.ndarray) -> float:
     c = float(np.dot(u, v) / (np.linalg.norm(u) * np.linalg.norm(v)))
-    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+    return math.degrees(math.acos(min(1.0, max(-1.0, c))))
 
 
 def _angle_to_arc_deg(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
