@@ -20,8 +20,9 @@ from .coverage import coverage
 from .errors import InvalidMeshError, InvalidParameterError, InvalidUnitsError
 from .export import Candidates, GraspSet
 from .gripper import GripperSpec
-from .params import TOLERANCES, Params, QualityOptions, from_keywords, keyword_parameters
+from .params import Params, QualityOptions, from_keywords, keyword_parameters
 from .parts import Part, load_part
+from .seating import SEAT_TRIES, Seated, SeatHold, SeatJudge, nearest_members
 from .transforms import grasp_frames, roll_angles_rad
 
 if TYPE_CHECKING:
@@ -660,6 +661,13 @@ def _cluster_and_export(
             "weights": quality.WEIGHTS.to_dict(),
             "near": {"radius": quality.NEAR.radius, "angle_deg": quality.NEAR.angle_deg},
         }
+    seated: dict[int, Seated] = {}
+    judge = _seat_judge(spec, extras, mu, params)
+    if judge is not None:
+        t0 = time.perf_counter()
+        medoids, keep, seated, stats["seat"] = _seat_choose(judge, cands, labels, medoids, clusters)
+        stats["timings_s"]["seat"] = time.perf_counter() - t0
+        clusters, sizes, medoid_of = clusters[keep], sizes[keep], medoid_of[keep]
     sim = None
     if extras.options.validate and len(medoids) == 0:
         from .physics import summarise
@@ -669,6 +677,12 @@ def _cluster_and_export(
         t0 = time.perf_counter()
         medoids, sim = _validate(cands, labels, medoids, clusters, spec, mu, params, extras, stats, report)
         stats["timings_s"]["validate"] = time.perf_counter() - t0
+    if judge is not None:  # a grasp the validation repaired with another member: its seat for the export
+        for m in medoids:
+            if int(m) not in seated and (
+                s := judge.seat(_poses(cands, medoids[medoids == m])[0], float(cands.widths[m]))
+            ):
+                seated[int(m)] = s
     # best first within each translation cluster: (validated grasps first,) larger quality score, then candidate
     # index; the score needs only the exported grasps' terms. Without the part (recluster without `mesh` of
     # candidates stored unscored) the friction margin orders them
@@ -688,8 +702,6 @@ def _cluster_and_export(
         terms, key = terms[order], key[order]
     cands = replace(cands, labels=labels, medoids=medoids)
     grasps = _grasps(cands, medoids, clusters, sizes)
-    if spec.geometry is not None and extras.part is not None and extras.part.mesh is not None:
-        stats["seat"] = _seat_grasps(grasps, spec, extras.part, mu, params)
     for r, g in enumerate(grasps):
         m = int(medoids[r])
         if terms is not None:
@@ -700,6 +712,7 @@ def _cluster_and_export(
             g["hold_margin"] = round(float(cands.hold_margin[m]), 6)
         if sim is not None:
             g["sim"] = sim[order[r]].to_json()
+    _seat_grasps(grasps, seated)
     stats["coverage"] = coverage(cands.midpoints, cands.axes, medoids).to_json()
     stats["timings_s"]["total"] = time.perf_counter() - t_all
     report("export", 1.0)
@@ -776,42 +789,78 @@ def _grasps(cands: Candidates, medoids: np.ndarray, clusters: np.ndarray, sizes:
     return out
 
 
-def _seat_grasps(
-    grasps: list[dict[str, Any]], spec: GripperSpec, part: Part, mu: float, params: Params
-) -> dict[str, int]:
-    """Fingers from CAD close until they touch (CONTRACT.md): each exported grasp's `width`, `contacts`, `normals`
-    and `friction_margin_deg` become the seat's (graspgen.collision.seat_fingers, from the contact end of the fingers'
-    travel that criterion (d) cleared): `contacts` holds, per finger, its contact nearest the finger's closing line,
-    `finger_contacts` and `finger_normals` all of them (a V-groove's two flanks); the pose stays the candidate's (the
-    gripper's body was checked there). Returns the counts for stats."""
-    assert part.mesh is not None
+def _seat_judge(spec: GripperSpec, extras: _Extras, mu: float, params: Params) -> SeatJudge | None:
+    """The judge of exported grasps on their seats (graspgen.seating) for a gripper from CAD with the part's mesh;
+    None for box fingers (they touch where the pair was sampled) or without the mesh (recluster without it)."""
+    part = extras.part
+    if spec.geometry is None or part is None or part.mesh is None:
+        return None
+    hold = None
+    if params.hold != "off" and extras.mass_kg is not None and spec.grip_force is not None:
+        com = quality.center_of_mass(part.mesh, part.points)
+        hold = SeatHold(com, _hold.hold_load(extras.mass_kg, params.accel), spec.grip_force, mu)
     tree = _collision.build_tree(part.mesh.vertices, part.mesh.faces)
-    solids = spec.solids()
-    half = quality.half_angle_deg(mu, params.safety_factor)
-    margin = TOLERANCES.inner_margin
-    unseated = 0
+    return SeatJudge(tree, spec.solids(), quality.half_angle_deg(mu, params.safety_factor), hold)
+
+
+def _seat_choose(
+    judge: SeatJudge, cands: Candidates, labels: np.ndarray, medoids: np.ndarray, clusters: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, dict[int, Seated], dict[str, Any]]:
+    """Each grasp to export (`medoids`, final clusters `clusters` (m, 2)) seated and judged by (c) and (e) on its
+    seat; one that fails is replaced by the nearest member of its cluster that passes (at most SEAT_TRIES tried),
+    a cluster without one is left out. Returns the chosen candidates, which rows of `medoids` kept one, their seats
+    by candidate index, and the counts for stats.seat."""
+    queues = [
+        [int(m), *nearest_members(labels, clusters[r], int(m), cands.midpoints, cands.axes)[: SEAT_TRIES - 1]]
+        for r, m in enumerate(medoids)
+    ]
+    chosen = np.full(len(medoids), -1, dtype=np.int64)
+    seated: dict[int, Seated] = {}
+    failed = {"unseated": 0, "friction": 0, "hold": 0}
+    tried = 0
+    for attempt in range(SEAT_TRIES):  # one round seats the next member of every cluster still without a grasp
+        rows = [r for r in range(len(medoids)) if chosen[r] < 0 and attempt < len(queues[r])]
+        if not rows:
+            break
+        idx = np.array([queues[r][attempt] for r in rows], dtype=np.int64)
+        tried += len(idx)
+        for r, t, s in zip(rows, idx, judge.seat_many(_poses(cands, idx), cands.widths[idx]), strict=True):
+            if s is not None and s.passes:
+                chosen[r] = t
+                seated[int(t)] = s
+            elif s is None:
+                failed["unseated"] += 1
+            elif s.friction_margin_deg < 0.0:
+                failed["friction"] += 1
+            else:
+                failed["hold"] += 1
+    keep = chosen >= 0
+    counts = {
+        "grasps": int(np.sum(keep)),
+        "replaced": int(np.sum(keep & (chosen != medoids))),
+        "dropped": int(np.sum(~keep)),
+        "tried": tried,
+    }
+    return chosen[keep], keep, seated, {**counts, "failed": failed}
+
+
+def _seat_grasps(grasps: list[dict[str, Any]], seated: dict[int, Seated]) -> None:
+    """Fingers from CAD close until they touch (CONTRACT.md): each exported grasp's `width`, `contacts`, `normals`,
+    `friction_margin_deg` and `hold_margin` become its seat's (graspgen.seating): `contacts` holds, per finger, its
+    contact nearest the finger's closing line, `finger_contacts` and `finger_normals` all of them (a V-groove's two
+    flanks); the pose stays the candidate's (the gripper's body was checked there)."""
     for g in grasps:
-        T = np.asarray(g["pose"], dtype=np.float64)
-        seat = _collision.seat_fingers(tree, solids, T, float(g["width"]), margin)
-        if seat is None:
-            unseated += 1
+        s = seated.get(int(g["candidate"]))
+        if s is None:
             continue
-        x, o = T[:3, 0], T[:3, 3]
-        contacts: list[list[float]] = []
-        normals: list[list[float]] = []
-        for k in range(2):
-            pts = seat.points[k]
-            off = (pts - o) - np.outer((pts - o) @ x, x)  # distance from the closing line through the origin
-            q = int(np.argmin(np.einsum("ij,ij->i", off, off)))
-            contacts.append(pts[q].tolist())
-            normals.append(seat.normals[k][q].tolist())
-        g["width"] = float(seat.width)
-        g["contacts"] = contacts
-        g["normals"] = normals
-        g["friction_margin_deg"] = _collision.seat_friction_margin_deg(seat, x, half)
-        g["finger_contacts"] = [seat.points[k].tolist() for k in range(2)]
-        g["finger_normals"] = [seat.normals[k].tolist() for k in range(2)]
-    return {"grasps": len(grasps) - unseated, "unseated": unseated}
+        g["width"] = float(s.seat.width)
+        g["contacts"] = s.contacts.tolist()
+        g["normals"] = s.normals.tolist()
+        g["friction_margin_deg"] = s.friction_margin_deg
+        if s.hold_margin is not None:
+            g["hold_margin"] = round(s.hold_margin, 6)
+        g["finger_contacts"] = [s.seat.points[k].tolist() for k in range(2)]
+        g["finger_normals"] = [s.seat.normals[k].tolist() for k in range(2)]
 
 
 def _empty_reason(

@@ -273,3 +273,55 @@ def test_generate_with_a_cad_gripper_exports_the_seated_contacts():
             for p in [g["contacts"][k], *g["finger_contacts"][k]]:
                 _, dist, _ = trimesh.proximity.closest_point(cyl, np.array([p]))
                 assert dist[0] < 1e-6
+
+
+def test_the_seats_torsion_radius_has_known_answers():
+    """Two contacts (a V-groove's flanks) d apart across the closing axis: d / 2; a square outline of half-diagonal a
+    (a face's overlap): 2a / 3; one contact: the model's point contact; spread along the axis itself does not count."""
+    from graspgen.hold import HOLD
+    from graspgen.seating import seat_torsion_radius
+
+    x = np.array([1.0, 0.0, 0.0])
+    assert seat_torsion_radius(np.array([[0.0, -0.004, 0.0], [0.0, 0.004, 0.0]]), x) == pytest.approx(0.004)
+    square = np.array([[0.0, 1.0, 1.0], [0.0, -1.0, 1.0], [0.0, -1.0, -1.0], [0.0, 1.0, -1.0]]) * 0.003
+    assert seat_torsion_radius(square, x) == pytest.approx(2 * 0.003 * np.sqrt(2) / 3)
+    assert seat_torsion_radius(np.array([[0.1, 0.2, 0.3]]), x) == HOLD.min_torsion_radius
+    assert seat_torsion_radius(np.array([[0.0, 0.0, 0.0], [0.01, 0.0, 0.0]]), x) == HOLD.min_torsion_radius
+
+
+@pytest.mark.slow
+def test_every_exported_grasp_of_a_cad_gripper_passes_c_and_e_on_its_seat():
+    """The V-groove fingers on a part that is not round touch where the pad does not: their rims meet the part at
+    points. Every exported grasp passes criteria (c) and (e) on its seat (its friction margin and hold margin are
+    the seat's, recomputed here independently of the export), and stats.seat accounts for every cluster: exported
+    (the medoid or a member replacing it) or dropped."""
+    import graspgen
+    from graspgen.hold import hold_load
+    from graspgen.params import Params
+    from graspgen.quality import center_of_mass, half_angle_deg
+    from graspgen.seating import SeatHold, SeatJudge
+
+    if not (SHARED / "tless_04.stl").exists():
+        pytest.skip(f"tless_04.stl not found in {SHARED}")
+    part = load_part(SHARED / "tless_04.stl", units="mm")
+    spec = GripperSpec.load(EXAMPLES / "pgn-80-vgroove.json")
+    gs = graspgen.generate(part, spec, points=3000, k1=8, k2=2, mass_kg=0.2)
+    export = gs.to_json()
+    force = spec.grip_force
+    assert force is not None
+    seat = export["stats"]["seat"]
+    assert seat["grasps"] == len(export["grasps"]) > 0
+    assert seat["grasps"] + seat["dropped"] == len({tuple(g) for g in gs.candidates.labels.tolist()})
+    assert seat["tried"] >= seat["grasps"] + seat["dropped"]
+    judge = SeatJudge(
+        build_tree(part.mesh.vertices, part.mesh.faces),
+        spec.solids(),
+        half_angle_deg(spec.friction, 1.5),
+        SeatHold(center_of_mass(part.mesh, part.points), hold_load(0.2, Params().accel), force, spec.friction),
+    )
+    for g in export["grasps"]:
+        s = judge.seat(np.array(g["pose"]), float(gs.candidates.widths[g["candidate"]]))
+        assert s is not None and s.passes
+        assert g["friction_margin_deg"] == pytest.approx(s.friction_margin_deg) and g["friction_margin_deg"] >= 0
+        assert g["hold_margin"] == pytest.approx(s.hold_margin, abs=1e-6) and g["hold_margin"] >= 1.0
+        assert g["width"] == pytest.approx(s.seat.width)
