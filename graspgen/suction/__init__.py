@@ -1,0 +1,9 @@
+"""Suction cups, the second gripper kind (CONTRACT.md "Suction cups"): the spec, and the method's criteria for a cup.
+
+`SuctionSpec` is the validated spec (a cup and the tool behind it); `graspgen.generate(part, gripper=SuctionSpec)`
+runs the suction method (docs/HOLD.md "Suction cups: the model").
+"""
+
+from ._spec import KIND, MAX_VACUUM, SuctionSpec, ToolCylinder, read_spec_json
+
+__all__ = ["SuctionSpec", "ToolCylinder", "KIND", "MAX_VACUUM", "read_spec_json"]
