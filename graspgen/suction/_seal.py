@@ -59,6 +59,8 @@ REASONS = {
     HOLE: "hole",  # an interior probe finds a hole, slot or gap under the cup
 }
 GRID = 8
+#: every this many lip probes are tested on their own before the cup's triangles are gathered (8 of 32)
+_PRETEST_STEP = 4
 _CHUNK = 256
 _STACK = 128
 
@@ -142,34 +144,40 @@ def _seal_one(
     px, py, pz = P[i, 0], P[i, 1], P[i, 2]
     ax, ay, az = A[i, 0], A[i, 1], A[i, 2]
     xx, xy, xz, yx, yy, yz = roll0_axes(ax, ay, az)
+    frame = (px, py, pz, xx, xy, xz, yx, yy, yz, ax, ay, az)
     z_lo = rule.lo
     z_hi = rule.hi + rule.recess
     g = rule.guard * (r + abs(z_lo) + abs(z_hi))
+    tiny = rule.guard * r * r  # twice the area in the plane of a triangle seen edge-on
+    lip = rule.lip
+    nl = lip.shape[0]
+
+    # a few lip probes on their own first (each walks the tree along its own line): most failing cups fail there,
+    # before the triangles under the whole cup are gathered
+    for k in range(0, nl, _PRETEST_STEP):
+        d, facing = _probe(part, frame, lip[k, 0], lip[k, 1], (z_lo - g, z_hi + g), g, tiny, s)
+        status = _lip_status(d, facing, rule, g)
+        if status != PASS:
+            out.status[i] = status
+            return items
+
     reach = r + g
     p0 = (px + z_lo * ax, py + z_lo * ay, pz + z_lo * az)
     p1 = (px + z_hi * ax, py + z_hi * ay, pz + z_hi * az)
     count = triangles_near_segment(part.tree, p0, p1, reach, s.idx, s.stack)
 
     # the gathered triangles in the cup's frame, those that reach the disc and the depth window
-    T, N = part.tree.triangles, part.normals
+    N = part.normals
     kept = 0
-    tiny = rule.guard * r * r
     for q in range(count):
         t = s.idx[q]
-        lo_x = lo_y = lo_z = np.inf
-        hi_x = hi_y = hi_z = -np.inf
-        for v in range(3):
-            dx, dy, dz = T[t, v, 0] - px, T[t, v, 1] - py, T[t, v, 2] - pz
-            u = dx * xx + dy * xy + dz * xz
-            w = dx * yx + dy * yy + dz * yz
-            d = dx * ax + dy * ay + dz * az
-            s.loc[kept, v, 0], s.loc[kept, v, 1], s.loc[kept, v, 2] = u, w, d
-            lo_x, hi_x = min(lo_x, u), max(hi_x, u)
-            lo_y, hi_y = min(lo_y, w), max(hi_y, w)
-            lo_z, hi_z = min(lo_z, d), max(hi_z, d)
-        if lo_x > reach or hi_x < -reach or lo_y > reach or hi_y < -reach or lo_z > z_hi + g or hi_z < z_lo - g:
+        if not _to_cup_frame(part.tree.triangles, t, frame, s.loc[kept], z_lo - g, z_hi + g):
             continue
         L = s.loc[kept]
+        lo_x, hi_x = min(L[0, 0], L[1, 0], L[2, 0]), max(L[0, 0], L[1, 0], L[2, 0])
+        lo_y, hi_y = min(L[0, 1], L[1, 1], L[2, 1]), max(L[0, 1], L[1, 1], L[2, 1])
+        if lo_x > reach or hi_x < -reach or lo_y > reach or hi_y < -reach:
+            continue
         area2 = (L[1, 0] - L[0, 0]) * (L[2, 1] - L[0, 1]) - (L[1, 1] - L[0, 1]) * (L[2, 0] - L[0, 0])
         if abs(area2) <= tiny:
             continue  # seen edge-on: a wall along the axis
@@ -179,18 +187,14 @@ def _seal_one(
     items = _bin(s, kept, r, items)
 
     # the lip
-    lip = rule.lip
-    nl = lip.shape[0]
     c0 = 2.0 * r * math.sin(math.pi / nl)
     l0 = math.hypot(r, rule.height)
     worst = 0.0
     for k in range(nl):
-        d, facing = _first_hit(s, items, lip[k, 0], lip[k, 1], r, z_lo - g, z_hi + g)
-        if d == np.inf:
-            out.status[i] = OFF
-            return items
-        if not facing or d < rule.lo - g or d > rule.hi + g:
-            out.status[i] = DEPTH
+        d, facing = _first_hit(s, items, lip[k, 0], lip[k, 1], r, (z_lo - g, z_hi + g), tiny)
+        status = _lip_status(d, facing, rule, g)
+        if status != PASS:
+            out.status[i] = status
             return items
         s.depth[k] = d
         worst = max(worst, abs(math.hypot(r, rule.height + d) / l0 - 1.0))
@@ -215,12 +219,102 @@ def _seal_one(
     inner = rule.inner
     deepest = d_max + rule.recess + g
     for k in range(inner.shape[0]):
-        d, facing = _first_hit(s, items, inner[k, 0], inner[k, 1], r, z_lo - g, deepest)
+        d, facing = _first_hit(s, items, inner[k, 0], inner[k, 1], r, (z_lo - g, deepest), tiny)
         if d == np.inf or not facing:
             out.status[i] = HOLE
             return items
     out.status[i] = PASS
     return items
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _lip_status(d: float, facing: bool, rule: SealRule, g: float) -> int:
+    """A lip probe's verdict from its first hit (depth d, inf: none): OFF, DEPTH or PASS."""
+    if d == np.inf:
+        return OFF
+    if not facing or d < rule.lo - g or d > rule.hi + g:
+        return DEPTH
+    return PASS
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _to_cup_frame(
+    T: np.ndarray,
+    t: int,
+    frame: tuple[float, float, float, float, float, float, float, float, float, float, float, float],
+    out: np.ndarray,
+    z0: float,
+    z1: float,
+) -> bool:
+    """Triangle t's corners in the cup's frame (x, y, depth) into out (3, 3); False (out partly written) when the
+    triangle lies wholly outside the depths [z0, z1]. The depth first: most triangles near a curved cup are rejected
+    by it alone."""
+    px, py, pz, xx, xy, xz, yx, yy, yz, ax, ay, az = frame
+    lo, hi = np.inf, -np.inf
+    for v in range(3):
+        d = (T[t, v, 0] - px) * ax + (T[t, v, 1] - py) * ay + (T[t, v, 2] - pz) * az
+        out[v, 2] = d
+        lo, hi = min(lo, d), max(hi, d)
+    if lo > z1 or hi < z0:
+        return False
+    for v in range(3):
+        dx, dy, dz = T[t, v, 0] - px, T[t, v, 1] - py, T[t, v, 2] - pz
+        out[v, 0] = dx * xx + dy * xy + dz * xz
+        out[v, 1] = dx * yx + dy * yy + dz * yz
+    return True
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _depth_at(L: np.ndarray, x: float, y: float, tiny: float) -> float:
+    """The depth of the triangle L (3, 3) (cup frame) at (x, y), or inf when (x, y) lies outside it (2D edge
+    functions, closed) or it is seen edge-on (twice its area in the plane at most `tiny`)."""
+    area2 = (L[1, 0] - L[0, 0]) * (L[2, 1] - L[0, 1]) - (L[1, 1] - L[0, 1]) * (L[2, 0] - L[0, 0])
+    if abs(area2) <= tiny:
+        return np.inf
+    e0 = (L[2, 0] - L[1, 0]) * (y - L[1, 1]) - (L[2, 1] - L[1, 1]) * (x - L[1, 0])
+    e1 = (L[0, 0] - L[2, 0]) * (y - L[2, 1]) - (L[0, 1] - L[2, 1]) * (x - L[2, 0])
+    e2 = (L[1, 0] - L[0, 0]) * (y - L[0, 1]) - (L[1, 1] - L[0, 1]) * (x - L[0, 0])
+    if area2 > 0.0:
+        if e0 < 0.0 or e1 < 0.0 or e2 < 0.0:
+            return np.inf
+    elif e0 > 0.0 or e1 > 0.0 or e2 > 0.0:
+        return np.inf
+    d: float = (e0 * L[0, 2] + e1 * L[1, 2] + e2 * L[2, 2]) / area2
+    return d
+
+
+@njit(cache=True, error_model="numpy")
+def _probe(
+    part: SealPart,
+    frame: tuple[float, float, float, float, float, float, float, float, float, float, float, float],
+    x: float,
+    y: float,
+    window: tuple[float, float],
+    g: float,
+    tiny: float,
+    s: _Scratch,
+) -> tuple[float, bool]:
+    """One probe through (x, y) of the cup's plane on its own: the triangles near its line (depths `window`) from
+    the tree, then the first hit as _first_hit finds it (the same arithmetic: the same answer for that probe)."""
+    px, py, pz, xx, xy, xz, yx, yy, yz, ax, ay, az = frame
+    z0, z1 = window
+    ox, oy, oz = px + x * xx + y * yx, py + x * xy + y * yy, pz + x * xz + y * yz
+    p0 = (ox + z0 * ax, oy + z0 * ay, oz + z0 * az)
+    p1 = (ox + z1 * ax, oy + z1 * ay, oz + z1 * az)
+    count = triangles_near_segment(part.tree, p0, p1, g, s.idx, s.stack)
+    L = s.loc[0]
+    best, facing = np.inf, False
+    for q in range(count):
+        t = s.idx[q]
+        if not _to_cup_frame(part.tree.triangles, t, frame, L, z0, z1):
+            continue
+        d = _depth_at(L, x, y, tiny)
+        if d < z0 or d > z1:
+            continue
+        front = part.normals[t, 0] * ax + part.normals[t, 1] * ay + part.normals[t, 2] * az < 0.0
+        if d < best or (d == best and front and not facing):
+            best, facing = d, front
+    return best, facing
 
 
 @njit(cache=True, error_model="numpy")
@@ -264,12 +358,13 @@ def _cells(bx: np.ndarray, r: float, cell: float) -> tuple[int, int, int, int]:
 
 @njit(cache=True, error_model="numpy")
 def _first_hit(
-    s: _Scratch, items: np.ndarray, x: float, y: float, r: float, z0: float, z1: float
+    s: _Scratch, items: np.ndarray, x: float, y: float, r: float, window: tuple[float, float], tiny: float
 ) -> tuple[float, bool]:
     """(depth, faces the cup) of the first triangle that the probe through (x, y) along +a meets within depths
-    [z0, z1]; (inf, False) when none does. A tie in depth (a probe on a shared edge) prefers a triangle facing the
-    cup. The probe lies in the cell of (x, y); the triangles whose bounds reach it are in that cell's items (_bin
-    puts a triangle in every cell its bounds touch, and a probe on a cell border lies in both)."""
+    `window` (z0, z1); (inf, False) when none does. A tie in depth (a probe on a shared edge) prefers a triangle
+    facing the cup. The probe lies in the cell of (x, y); the triangles whose bounds reach it are in that cell's
+    items (_bin puts a triangle in every cell its bounds touch, and a probe on a cell border lies in both)."""
+    z0, z1 = window
     cell = 2.0 * r / GRID
     a = min(max(int(math.floor((x + r) / cell)), 0), GRID - 1)
     b = min(max(int(math.floor((y + r) / cell)), 0), GRID - 1)
@@ -280,17 +375,7 @@ def _first_hit(
         bx = s.box[t]
         if x < bx[0] or x > bx[1] or y < bx[2] or y > bx[3]:
             continue
-        L = s.loc[t]
-        area2 = (L[1, 0] - L[0, 0]) * (L[2, 1] - L[0, 1]) - (L[1, 1] - L[0, 1]) * (L[2, 0] - L[0, 0])
-        e0 = (L[2, 0] - L[1, 0]) * (y - L[1, 1]) - (L[2, 1] - L[1, 1]) * (x - L[1, 0])
-        e1 = (L[0, 0] - L[2, 0]) * (y - L[2, 1]) - (L[0, 1] - L[2, 1]) * (x - L[2, 0])
-        e2 = (L[1, 0] - L[0, 0]) * (y - L[0, 1]) - (L[1, 1] - L[0, 1]) * (x - L[0, 0])
-        if area2 > 0.0:
-            if e0 < 0.0 or e1 < 0.0 or e2 < 0.0:
-                continue
-        elif e0 > 0.0 or e1 > 0.0 or e2 > 0.0:
-            continue
-        d = (e0 * L[0, 2] + e1 * L[1, 2] + e2 * L[2, 2]) / area2
+        d = _depth_at(s.loc[t], x, y, tiny)
         if d < z0 or d > z1:
             continue
         if d < best or (d == best and s.front[t] and not facing):
