@@ -299,3 +299,35 @@ def test_seal_equals_a_brute_force_evaluation_on_random_candidates(name):
     assert passed.any() and (~passed).any()
     same_reason = np.mean(got[~passed] == want[~passed])
     assert same_reason > 0.8
+
+
+def test_empty_reason_names_the_last_criterion_and_what_would_change_it():
+    plate = trimesh.creation.box((0.1, 0.1, 0.01))
+    heavy = graspgen.generate(plate, SPEC, units="m", points=600, mass_kg=6.0)
+    why = heavy.stats["empty_reason"]
+    assert not heavy.grasps and why["criterion"] == "hold" and why["limit"] in ("friction", "peel", "pull")
+    # the margin is proportional to the vacuum and inversely to the mass: the best cup holds at exactly these
+    best = why["best_margin"]
+    assert why["vacuum_needed"] == pytest.approx(SPEC.vacuum / best) and why["max_mass_kg"] == pytest.approx(6 * best)
+    lighter = graspgen.generate(plate, SPEC, units="m", points=600, mass_kg=why["max_mass_kg"] * 0.99)
+    assert lighter.grasps
+    # a pot: a sphere of 25 mm (too curved to seal on) with a pocket 36 mm wide and 30 mm deep, whose floor is the
+    # only place the cup seals; a tool wider than the pocket meets its wall on the way in
+    pot = _pot()
+    assert pot.is_watertight
+    slim = graspgen.generate(pot, SPEC, units="m", points=4000)
+    assert slim.grasps and slim.stats["rejected"]["collision"] == 0
+    np.testing.assert_allclose(slim.candidates.approach, np.tile([0.0, 0.0, -1.0], (len(slim.candidates), 1)))
+    wide = SuctionSpec.from_dict({**CUP, "tool": {"radius": 0.02, "length": 0.1}})
+    walled = graspgen.generate(pot, wide, units="m", points=4000)
+    why = walled.stats["empty_reason"]
+    assert why["criterion"] == "collision" and "tool" in why["message"]
+    assert walled.stats["rejected"]["collision"] == len(slim.candidates)
+
+
+def _pot() -> trimesh.Trimesh:
+    """A sphere of radius 25 mm cut at z = 15 mm, with a pocket of radius 18 mm down to z = -15 mm (revolved)."""
+    R, top, floor, pocket = 0.025, 0.015, -0.015, 0.018
+    outer = [(R * math.cos(t), R * math.sin(t)) for t in np.linspace(-math.pi / 2, math.asin(top / R), 40)]
+    profile = [(0.0, -R), *outer[1:], (pocket, top), (pocket, floor), (0.0, floor)]
+    return trimesh.creation.revolve(np.array(profile), sections=96)
