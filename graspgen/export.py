@@ -140,18 +140,18 @@ def write_atomic(path: str | os.PathLike[str], data: bytes) -> None:
         raise
 
 
-@dataclass
-class GraspSet:
+class ExportMethods:
+    """The grasp_set/1 export of a run's result, for either gripper kind (GraspSet, suction.SuctionGraspSet): both
+    hold the same fields, their gripper spec and candidates differ."""
+
     object: dict[str, Any]
-    gripper: GripperSpec
+    gripper: Any  # a spec with to_dict(): GripperSpec or SuctionSpec
     params: Params
     friction: float
     stats: dict[str, Any]
     grasps: list[dict[str, Any]]
-    candidates: Candidates
-    warnings: list[str] = field(default_factory=list)
-    #: the part's mass (kg) that criterion (e) used: given, or density x volume
-    mass_kg: float | None = None
+    candidates: Any  # the kind's candidates, with arrays() for the NPZ
+    mass_kg: float | None
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -177,6 +177,22 @@ class GraspSet:
     def candidates_npz_bytes(self) -> bytes:
         """The candidate NPZ (CONTRACT.md) as bytes, as save_candidates writes it."""
         return npz_bytes(self.candidates.arrays())
+
+
+@dataclass
+class GraspSet(ExportMethods):
+    """The result of a parallel-jaw run: the export (to_json) and its candidates (save_candidates)."""
+
+    object: dict[str, Any]
+    gripper: GripperSpec
+    params: Params
+    friction: float
+    stats: dict[str, Any]
+    grasps: list[dict[str, Any]]
+    candidates: Candidates
+    warnings: list[str] = field(default_factory=list)
+    #: the part's mass (kg) that criterion (e) used: given, or density x volume
+    mass_kg: float | None = None
 
 
 #: deflate level of the candidate NPZ, through ISA-L (the `isal` package): its level 1 compresses the float arrays

@@ -9,7 +9,6 @@ readers of either kind), `axes (n, 3)` (the approaches), `free_rolls (n, R)`, `r
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass, field
 from typing import Any
@@ -17,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidCandidatesError
-from ..export import FORMAT, npz_bytes, write_atomic
+from ..export import ExportMethods
 from ..params import Params
 from ._spec import SuctionSpec
 
@@ -105,7 +104,7 @@ def load_suction_candidates(path: str | os.PathLike[str]) -> SuctionCandidates:
 
 
 @dataclass
-class SuctionGraspSet:
+class SuctionGraspSet(ExportMethods):
     """The result of a suction run: the export (to_json) and its candidates (save_candidates), as GraspSet is for
     jaws."""
 
@@ -119,28 +118,3 @@ class SuctionGraspSet:
     warnings: list[str] = field(default_factory=list)
     #: the part's mass (kg) that criterion hold used: given, or density x volume
     mass_kg: float | None = None
-
-    def to_json(self) -> dict[str, Any]:
-        return {
-            "format": FORMAT,
-            "units": "m",
-            "object": dict(self.object),
-            "gripper": self.gripper.to_dict(),
-            "params": self.params.to_dict(friction=self.friction, mass_kg=self.mass_kg),
-            "stats": self.stats,
-            "grasps": self.grasps,
-        }
-
-    def to_json_bytes(self) -> bytes:
-        """Canonical bytes: the same inputs, parameters and seed give the same bytes (but for timings)."""
-        return (json.dumps(self.to_json(), indent=1, allow_nan=False) + "\n").encode("utf-8")
-
-    def save(self, path: str | os.PathLike[str]) -> None:
-        write_atomic(path, self.to_json_bytes())
-
-    def save_candidates(self, path: str | os.PathLike[str]) -> None:
-        write_atomic(path, self.candidates_npz_bytes())
-
-    def candidates_npz_bytes(self) -> bytes:
-        """The candidate NPZ (module docstring) as bytes, as save_candidates writes it."""
-        return npz_bytes(self.candidates.arrays())
