@@ -16,6 +16,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from graspgen.export import load_candidates
+from graspgen.gripper import GripperSpec
 from graspgen.pick import DEFAULT_LIMIT, DEFAULT_PREGRASP_DISTANCE, PickIndex, PickQuery
 from services.common.grippers import stored_gripper_spec
 from services.common.models import GraspSet, GripperVersion
@@ -77,6 +78,8 @@ def _index(state: Any, ref: PickRef) -> PickIndex:
         gripper = stored_gripper_spec(state.storage, ref.gripper_spec)
     except FileNotFoundError:
         raise ApiError(503, "artifact-missing", "a mesh file of the gripper is missing from storage") from None
+    if not isinstance(gripper, GripperSpec):
+        raise ApiError(422, "unsupported-gripper", "the pick query does not serve suction sets yet", field="grasp_set")
     index = PickIndex.build(load_candidates(io.BytesIO(data)), gripper)
     cache.put(ref.id, index, index.nbytes)
     return index
