@@ -4,6 +4,25 @@
 runs the suction method (docs/HOLD.md "Suction cups: the model").
 """
 
+from ._export import SuctionCandidates, SuctionGraspSet, load_suction_candidates
+from ._generate import CRITERIA, CupJudgement, generate_suction, judge_cups, suction_candidates
+from ._model import SUCTION, SuctionModel
 from ._spec import KIND, MAX_VACUUM, SuctionSpec, ToolCylinder, read_spec_json
 
-__all__ = ["SuctionSpec", "ToolCylinder", "KIND", "MAX_VACUUM", "read_spec_json"]
+__all__ = [
+    "SuctionSpec",
+    "ToolCylinder",
+    "KIND",
+    "MAX_VACUUM",
+    "read_spec_json",
+    "SuctionCandidates",
+    "SuctionGraspSet",
+    "load_suction_candidates",
+    "generate_suction",
+    "judge_cups",
+    "CupJudgement",
+    "suction_candidates",
+    "CRITERIA",
+    "SuctionModel",
+    "SUCTION",
+]
