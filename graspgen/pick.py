@@ -43,7 +43,7 @@ from .errors import InvalidParameterError
 from .export import Candidates, GraspSet
 from .gripper import GripperSpec
 from .suction import SuctionSpec
-from .transforms import ROLL_REFERENCE_SWITCH, matrix_to_quaternion_xyzw, roll_basis
+from .transforms import approach_basis, matrix_to_quaternion_xyzw, roll_basis
 
 __all__ = [
     "pick",
@@ -157,7 +157,7 @@ class PickIndex:
         else:
             ci, ri = np.nonzero(free)
         z = np.asarray(candidates.axes, dtype=np.float64)
-        x0, y0 = _approach_basis(z)
+        x0, y0 = approach_basis(z)
         psi = np.asarray(candidates.roll_angles_rad, dtype=np.float64)[ri][:, None]
         x = libm.cos(psi) * x0[ci] + libm.sin(psi) * y0[ci]
         zc = z[ci]
@@ -275,18 +275,6 @@ class _Cup:
                 sl = slice(a, a + _MESH_BLOCK)
                 out[sl] = np.minimum(out[sl], (m[sl] @ self.hull.T).min(axis=1))
         return out
-
-
-def _approach_basis(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Roll-0 basis of suction grasps with unit approaches `z` (n, 3) (CONTRACT.md "Suction cups"): (X0, Y0), each
-    (n, 3) unit, X0 = the object's +X made orthogonal to Z (its +Y when |X . Z| > 0.9), Y0 = Z x X0."""
-    ref = np.zeros_like(z)
-    use_y = np.abs(z[:, 0]) > ROLL_REFERENCE_SWITCH
-    ref[~use_y, 0] = 1.0
-    ref[use_y, 1] = 1.0
-    x0 = ref - np.sum(ref * z, axis=1, keepdims=True) * z
-    x0 /= np.linalg.norm(x0, axis=1, keepdims=True)
-    return x0, np.cross(z, x0)
 
 
 @dataclass(frozen=True)

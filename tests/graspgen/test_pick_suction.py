@@ -165,7 +165,9 @@ def test_the_cone_applies_to_the_approach_and_the_order_is_the_hold_margin():
 
 def test_suction_frames_follow_the_contract():
     """Origin at the contact, +Z the approach, roll 0's X the object's +X made orthogonal to Z (its +Y when
-    |X . Z| > 0.9), X turning towards Y0 = Z x X0 with the roll."""
+    |X . Z| > 0.9), X turning towards Y0 = Z x X0 with the roll: as graspgen.transforms.suction_frames gives them."""
+    from graspgen.transforms import suction_frames
+
     rng = np.random.default_rng(3)
     z = rng.normal(size=(40, 3))
     z[:5] = [0.99, 0.1, 0.0]  # the reference switches to the object's +Y
@@ -181,6 +183,38 @@ def test_suction_frames_follow_the_contract():
         psi = c.roll_angles_rad[r]
         x = math.cos(psi) * x0 + math.sin(psi) * np.cross(zz, x0)
         assert np.allclose(f[k], [x, np.cross(zz, x), zz, c.contacts[i, 0]], atol=1e-12)
+        T = suction_frames(c.contacts[i, 0][None], zz[None], np.array([psi]))[0]
+        assert np.array_equal(f[k], T[:3].T)
+
+
+@pytest.fixture(scope="module")
+def box_set():
+    """The shipped cup on a 100 x 80 x 30 mm box of 0.2 kg: a real suction run."""
+    import trimesh
+
+    mesh = trimesh.creation.box(extents=(0.1, 0.08, 0.03))
+    return graspgen.generate(mesh, SPEC, units="m", points=1500, k1=4, k2=2, mass_kg=0.2)
+
+
+def test_a_suction_run_picks_with_its_own_cup_at_the_exported_poses(box_set):
+    """Picking from the run itself: every candidate is a pair (a round tool), the export's grasps come back at their
+    poses, the bin floor under the box keeps the cups of the top and the sides high enough, the cone keeps the
+    cups from above."""
+    res = graspgen.pick(box_set, np.eye(4), limit=1000)
+    assert res.considered == len(box_set.candidates) and res.score_source == "hold_margin"
+    by_candidate = {g["candidate"]: g for g in res.grasps}
+    for g in box_set.grasps:
+        assert np.allclose(by_candidate[g["candidate"]]["T_world_grasp"], g["pose"], atol=1e-12)
+        assert by_candidate[g["candidate"]]["hold_margin"] == pytest.approx(g["hold_margin"], abs=1e-6)
+    # the box lies on a floor 15 mm under its centre; a cup from above at 30 deg at most
+    floor = [{"point": [0, 0, -0.015], "normal": [0, 0, 1]}]
+    down = {"direction": [0, 0, -1], "max_angle_deg": 30}
+    top = graspgen.pick(box_set, np.eye(4), approach=down, planes=floor, limit=1000)
+    assert top.feasible > 0 and all(g["position"][2] == pytest.approx(0.015) for g in top.grasps)
+    sides = graspgen.pick(box_set, np.eye(4), planes=floor, limit=1000)
+    for g in sides.grasps:  # a cup on a side face keeps its rim (15 mm) above the floor
+        z = np.array(g["T_world_grasp"])[:3, 2]
+        assert g["position"][2] + 0.015 >= SPEC.cup_radius * math.hypot(z[0], z[1]) - 1e-9
 
 
 def _rim_points(spec: SuctionSpec, samples: int = 720) -> np.ndarray:
