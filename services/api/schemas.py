@@ -350,10 +350,10 @@ class GraspSetPage(Page):
 class GraspOut(BaseModel):
     rank: int
     pose: list[list[float]]
-    width: float
-    contacts: list[list[float]]
+    width: float | None = Field(description="a parallel grasp's contact distance, m; null for a suction grasp")
+    contacts: list[list[float]] = Field(description="two contacts (parallel), one (suction: the pose's origin)")
     normals: list[list[float]]
-    friction_margin_deg: float
+    friction_margin_deg: float | None = Field(description="a parallel grasp's friction margin; null for suction")
     free_rolls_deg: list[float]
     cluster: list[int]
     cluster_size: int
