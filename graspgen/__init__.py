@@ -20,7 +20,7 @@ from .params import Params
 from .parts import Part, load_part
 from .pick import PickResult, pick
 from .pipeline import generate, recluster
-from .suction import SuctionSpec
+from .suction import SuctionGraspSet, SuctionSpec
 
 __all__ = [
     "generate",
@@ -32,6 +32,7 @@ __all__ = [
     "load_candidates",
     "GripperSpec",
     "SuctionSpec",
+    "SuctionGraspSet",
     "GripperKind",
     "load_gripper",
     "Params",

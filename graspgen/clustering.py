@@ -16,7 +16,9 @@ cluster by its closing axes (k2 clusters) with the sign-invariant angle
 
     d(a, b) = arccos |a . b|   in radians, 0 .. pi/2,
 
-so a closing axis and its reverse (the same jaw pair, contacts swapped) are the same direction. Near 0 it is
+so a closing axis and its reverse (the same jaw pair, contacts swapped) are the same direction. A suction cup's
+approach and its reverse are different grasps: `two_stage(..., signed=True)` (metric "direction") uses the signed
+angle arccos(a . b), 0 .. pi, evaluated near 0 and pi from the chord as well. Near 0 it is
 evaluated as 2 arcsin(|a - s b| / 2) with s = sign(a . b), exact where arccos loses half its digits. The angle is a
 metric (the triangle inequality holds), unlike 1 - |a . b|, and it grows linearly with the deviation like the
 Euclidean midpoint distance, so both stages minimise the same kind of loss (1 - |a . b| ~ angle^2 / 2 would weight

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import io
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -222,3 +223,111 @@ def test_bad_inputs_are_refused():
         graspgen.generate(cloud, SPEC, points=300)
     # a spec dict of kind suction runs the suction method
     assert graspgen.generate(plate, CUP, units="m", points=300).to_json()["gripper"] == CUP
+
+
+def _reference_seal(mesh: trimesh.Trimesh, spec: SuctionSpec, p: np.ndarray, a: np.ndarray) -> str:
+    """The seal model written out plainly: every probe against every triangle (numpy), the rules of
+    docs/HOLD.md "seal" in the order the kernel applies them."""
+    from graspgen.suction._model import depth_limits, inner_probes, lip_points
+
+    r, h, e = spec.cup_radius, spec.cup_height, spec.max_strain
+    lo, hi = depth_limits(r, h, e)
+    recess = SUCTION.recess_depth
+    ref = np.array([0.0, 1.0, 0.0]) if abs(a[0]) > 0.9 else np.array([1.0, 0.0, 0.0])
+    x0 = ref - (ref @ a) * a
+    x0 /= np.linalg.norm(x0)
+    y0 = np.cross(a, x0)
+    loc = (mesh.triangles - p) @ np.column_stack([x0, y0, a])  # (m, 3, 3): x, y, depth
+    front = mesh.face_normals @ a < 0
+
+    def first_hit(x: float, y: float, z1: float) -> tuple[float, bool]:
+        v0, v1, v2 = loc[:, 0], loc[:, 1], loc[:, 2]
+        area = (v1[:, 0] - v0[:, 0]) * (v2[:, 1] - v0[:, 1]) - (v1[:, 1] - v0[:, 1]) * (v2[:, 0] - v0[:, 0])
+        w0 = (v2[:, 0] - v1[:, 0]) * (y - v1[:, 1]) - (v2[:, 1] - v1[:, 1]) * (x - v1[:, 0])
+        w1 = (v0[:, 0] - v2[:, 0]) * (y - v2[:, 1]) - (v0[:, 1] - v2[:, 1]) * (x - v2[:, 0])
+        w2 = (v1[:, 0] - v0[:, 0]) * (y - v0[:, 1]) - (v1[:, 1] - v0[:, 1]) * (x - v0[:, 0])
+        s = np.sign(area)
+        inside = (np.abs(area) > 1e-9 * r * r) & (w0 * s >= 0) & (w1 * s >= 0) & (w2 * s >= 0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            d = (w0 * v0[:, 2] + w1 * v1[:, 2] + w2 * v2[:, 2]) / area
+        ok = inside & (d >= lo) & (d <= z1)
+        if not ok.any():
+            return math.inf, False
+        best = d[ok].min()
+        return float(best), bool(front[ok & (d == best)].any())
+
+    depths = []
+    for x, y in lip_points(r):
+        d, facing = first_hit(x, y, hi + recess)
+        if d == math.inf:
+            return "reach"
+        if not facing or d > hi:
+            return "depth"
+        depths.append(d)
+    d = np.array(depths)
+    c0 = 2 * r * math.sin(math.pi / len(d))
+    cone = np.abs(np.hypot(r, h + d) / math.hypot(r, h) - 1)
+    perimeter = np.sqrt(1 + ((np.roll(d, -1) - d) / c0) ** 2) - 1
+    if max(cone.max(), perimeter.max()) > e:
+        return "stretch"
+    for x, y in inner_probes(r):
+        depth, facing = first_hit(x, y, d.max() + recess)
+        if depth == math.inf or not facing:
+            return "hole"
+    return "pass"
+
+
+@pytest.mark.parametrize("name", ["tless_20", "washer"])
+def test_seal_equals_a_brute_force_evaluation_on_random_candidates(name):
+    if name == "washer":
+        mesh = trimesh.creation.annulus(r_min=0.004, r_max=0.04, height=0.012, sections=48)
+    else:
+        path = Path(__file__).resolve().parents[3] / "shared" / "meshes" / "paper" / "tless_20.stl"
+        if not path.exists():
+            pytest.skip(f"shared mesh {path} not found")
+        mesh = graspgen.load_part(path, units="mm").mesh
+    rng = np.random.default_rng(11)
+    pts, faces = trimesh.sample.sample_surface(mesh, 300, seed=12)
+    tilt = rng.normal(scale=0.12, size=(300, 3))
+    app = -mesh.face_normals[faces] + tilt
+    app /= np.linalg.norm(app, axis=1, keepdims=True)
+    got = judge_cups(mesh, SPEC, pts, app).seal
+    want = np.array([_reference_seal(mesh, SPEC, p, a) for p, a in zip(pts, app, strict=True)])
+    # the kernel names the failure of the first lip probe it tests; the verdict pass / fail is the model's
+    np.testing.assert_array_equal(got == "pass", want == "pass")
+    passed = got == "pass"
+    assert passed.any() and (~passed).any()
+    same_reason = np.mean(got[~passed] == want[~passed])
+    assert same_reason > 0.8
+
+
+def test_empty_reason_names_the_last_criterion_and_what_would_change_it():
+    plate = trimesh.creation.box((0.1, 0.1, 0.01))
+    heavy = graspgen.generate(plate, SPEC, units="m", points=600, mass_kg=6.0)
+    why = heavy.stats["empty_reason"]
+    assert not heavy.grasps and why["criterion"] == "hold" and why["limit"] in ("friction", "peel", "pull")
+    # the margin is proportional to the vacuum and inversely to the mass: the best cup holds at exactly these
+    best = why["best_margin"]
+    assert why["vacuum_needed"] == pytest.approx(SPEC.vacuum / best) and why["max_mass_kg"] == pytest.approx(6 * best)
+    lighter = graspgen.generate(plate, SPEC, units="m", points=600, mass_kg=why["max_mass_kg"] * 0.99)
+    assert lighter.grasps
+    # a pot: a sphere of 25 mm (too curved to seal on) with a pocket 36 mm wide and 30 mm deep, whose floor is the
+    # only place the cup seals; a tool wider than the pocket meets its wall on the way in
+    pot = _pot()
+    assert pot.is_watertight
+    slim = graspgen.generate(pot, SPEC, units="m", points=4000)
+    assert slim.grasps and slim.stats["rejected"]["collision"] == 0
+    np.testing.assert_allclose(slim.candidates.approach, np.tile([0.0, 0.0, -1.0], (len(slim.candidates), 1)))
+    wide = SuctionSpec.from_dict({**CUP, "tool": {"radius": 0.02, "length": 0.1}})
+    walled = graspgen.generate(pot, wide, units="m", points=4000)
+    why = walled.stats["empty_reason"]
+    assert why["criterion"] == "collision" and "tool" in why["message"]
+    assert walled.stats["rejected"]["collision"] == len(slim.candidates)
+
+
+def _pot() -> trimesh.Trimesh:
+    """A sphere of radius 25 mm cut at z = 15 mm, with a pocket of radius 18 mm down to z = -15 mm (revolved)."""
+    R, top, floor, pocket = 0.025, 0.015, -0.015, 0.018
+    outer = [(R * math.cos(t), R * math.sin(t)) for t in np.linspace(-math.pi / 2, math.asin(top / R), 40)]
+    profile = [(0.0, -R), *outer[1:], (pocket, top), (pocket, floor), (0.0, floor)]
+    return trimesh.creation.revolve(np.array(profile), sections=96)
