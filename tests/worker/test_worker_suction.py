@@ -65,7 +65,8 @@ def test_a_suction_job_makes_a_set_that_is_served_released_and_picked(pg_service
     assert npz.status_code == 200
     cands = load_suction_candidates(io.BytesIO(npz.content))
     assert cands.contacts.shape[1:] == (1, 3) and len(cands) == export["stats"]["candidates"]
-    assert pg_service.get(f"/v1/grasp-sets/{gs}/recording").status_code == 200
+    rrd = pg_service.get(f"/v1/grasp-sets/{gs}/recording")
+    assert rrd.status_code == 200 and b"grasps/cups" in rrd.content  # the run logged the cup and tool at each grasp
     png = pg_service.get(f"/v1/grasp-sets/{gs}/preview.png?size=320x240")
     assert png.status_code == 200 and png.content[:8] == b"\x89PNG\r\n\x1a\n"
     # the catalogue serves it; a release pins it
