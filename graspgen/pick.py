@@ -263,23 +263,29 @@ class _Cup:
             hull = np.ascontiguousarray(spec.geometry.body.convex_hull.vertices, dtype=np.float64)
         return cls(tuple(cylinders), hull)
 
-    def lowest(self, m: np.ndarray) -> np.ndarray:
-        """(k,): the smallest m . p over every point p of the cup and tool, for unit directions m (k, 3) of the grasp
-        frame (a plane's normal): exact for the cylinders (a rim's lowest point) and the hull."""
-        side = np.sqrt(np.maximum(m[:, 0] ** 2 + m[:, 1] ** 2, 0.0))
-        out = np.full(len(m), np.inf)
+    def lowest(self, mx: np.ndarray, my: np.ndarray, mz: np.ndarray) -> np.ndarray:
+        """(k,): the smallest m . p over every point p of the cup and tool, for unit directions m = (mx, my, mz), each
+        (k,), of the grasp frame (a plane's normal): exact for the cylinders (a rim's lowest point) and the hull."""
+        side = np.sqrt(mx * mx + my * my)
+        out = np.full(len(mz), np.inf)
         for r, z0, z1 in self.cylinders:
-            out = np.minimum(out, np.minimum(z0 * m[:, 2], z1 * m[:, 2]) - r * side)
+            out = np.minimum(out, np.minimum(z0 * mz, z1 * mz) - r * side)
         if self.hull is not None:
-            hx, hy, hz = self.hull[:, 0], self.hull[:, 1], self.hull[:, 2]
-            for a in range(0, len(m), _MESH_BLOCK):
-                sl = slice(a, a + _MESH_BLOCK)
-                # multiply-adds, not a (k, 3) x (3, h) matrix product: BLAS is slow on an inner size of 3
-                heights = m[sl, 0:1] * hx
-                heights += m[sl, 1:2] * hy
-                heights += m[sl, 2:3] * hz
-                out[sl] = np.minimum(out[sl], heights.min(axis=1))
+            hx, hy, hz = (self.hull[:, j : j + 1] for j in range(3))
+            block = max(1024, _HULL_BLOCK // len(self.hull))
+            for a in range(0, len(mz), block):
+                sl = slice(a, a + block)
+                # (h, block) heights as multiply-adds reduced over the vertices (contiguous rows): a (k, 3) x (3, h)
+                # product is slow in BLAS with an inner size of 3, and a minimum along a short last axis in numpy
+                heights = hx * mx[sl]
+                heights += hy * my[sl]
+                heights += hz * mz[sl]
+                out[sl] = np.minimum(out[sl], heights.min(axis=0))
         return out
+
+
+#: heights computed at once by the hull test ((hull vertices) x (pairs) floats)
+_HULL_BLOCK = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -564,8 +570,8 @@ def _cup_lowest(index: PickIndex, sub: np.ndarray, distance: float) -> _Lowest:
     assert cup is not None  # a suction index
 
     def lowest(n_obj: np.ndarray, h0: np.ndarray) -> np.ndarray:
-        m = np.stack([_dot(sub[0:3], n_obj), _dot(sub[3:6], n_obj), _dot(sub[6:9], n_obj)], axis=1)
-        out: np.ndarray = np.minimum(h0, h0 - distance * m[:, 2]) + cup.lowest(m)
+        mx, my, mz = _dot(sub[0:3], n_obj), _dot(sub[3:6], n_obj), _dot(sub[6:9], n_obj)
+        out: np.ndarray = np.minimum(h0, h0 - distance * mz) + cup.lowest(mx, my, mz)
         return out
 
     return lowest
