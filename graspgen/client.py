@@ -7,6 +7,7 @@ with Client("http://graspgen:8000", token) as gg:
     gg.upload_object("ring-screw.stl", name="ring-screw", units="mm")
     gg.create_gripper(json.load(open("pgn-80.json")))
     gg.upload_gripper("examples/pgn-80-vgroove.json")  # a spec with geometry, with its mesh files
+    gg.upload_gripper("examples/cup-30.json")  # a suction cup (CONTRACT.md "Suction cups")
     job = gg.wait(gg.submit_job("ring-screw", "pgn-80", params={"points": 10000}))
     gg.release(job["grasp_set"])
     best = gg.pick(T_world_object, object="ring-screw", gripper="pgn-80",
@@ -197,11 +198,13 @@ class Client:
         files: Mapping[str, bytes | str | os.PathLike[str]] | None = None,
         base_dir: str | os.PathLike[str] | None = None,
     ) -> dict[str, Any]:
-        """Register a gripper spec (dict or graspgen.GripperSpec); an identical spec gives the existing version.
+        """Register a gripper spec of either kind (dict, graspgen.GripperSpec or graspgen.suction.SuctionSpec); an
+        identical spec gives the existing version.
 
-        A spec with `geometry` (CONTRACT.md "Gripper geometry from CAD") goes as multipart with the mesh files it
-        names: `files` maps each name to its bytes or a path; else each is read relative to `base_dir`. The same spec
-        and files again give the existing version; a changed file gives a new one."""
+        A spec with `geometry` (CONTRACT.md "Gripper geometry from CAD": fingers and body; "Suction cups": the tool's
+        body) goes as multipart with the mesh files it names: `files` maps each name to its bytes or a path; else each
+        is read relative to `base_dir`. The same spec and files again give the existing version; a changed file gives
+        a new one."""
         body = spec.to_dict() if hasattr(spec, "to_dict") else dict(spec)
         names = _geometry_files(body)
         if not names:
@@ -289,11 +292,17 @@ class Client:
         return self._conditional(f"/v1/grasp-sets/{int(grasp_set)}")[0]
 
     def candidates(self, grasp_set: int) -> Any:
-        """The candidate NPZ of a grasp set as graspgen.Candidates (for graspgen.pick without the server)."""
+        """The candidate NPZ of a grasp set, for graspgen.pick without the server: graspgen.Candidates for a
+        parallel gripper's set, graspgen.suction.SuctionCandidates for a suction set (one contact per candidate)."""
+        import numpy as np
+
         from .export import load_candidates
+        from .suction import load_suction_candidates
 
         r = self._send("GET", f"/v1/grasp-sets/{int(grasp_set)}/candidates", safe=True)
-        return load_candidates(io.BytesIO(r.content))
+        with np.load(io.BytesIO(r.content), allow_pickle=False) as z:
+            one_contact = "contacts" in z.files and z["contacts"].ndim == 3 and z["contacts"].shape[1] == 1
+        return (load_suction_candidates if one_contact else load_candidates)(io.BytesIO(r.content))
 
     def catalogue(self, object: str, gripper: str, *, version: int | None = None) -> CatalogueEntry:
         """The grasp set robots should use for the pair (released, else newest). The export is kept with its ETag;

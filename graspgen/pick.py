@@ -11,7 +11,18 @@ normal side of every plane. The survivors come best first in the set's quality o
   index.
 
 `T_world_grasp = T_world_object @ T_object_grasp(candidate, roll)`, with the contract's grasp frame and roll basis
-(graspgen.transforms). `PickIndex` holds the pairs' object-frame axes once per set; a query turns the world-frame
+(graspgen.transforms).
+
+A suction set (CONTRACT.md "Suction cups"; a SuctionSpec and candidates with one contact each) is queried the same
+way: the cone applies to the grasp's +Z (the approach, into the part), the planes to the cup (a cylinder of
+`cup_radius` from the lip at z = 0 back to -cup_height) and the tool behind it (a cylinder on the Z axis, or a body
+mesh) at the grasp and at the pre-grasp. The lowest point of a cylinder of radius r from z0 to z1 along a unit
+direction m of the grasp frame lies on a rim: min(z0 m_z, z1 m_z) - r sqrt(m_x^2 + m_y^2), exact; a body mesh's is
+a vertex of its convex hull. The cup and tool keep their shape on the way in, and a point's height above a plane is
+linear along the straight way in, so the grasp and the pre-grasp bound the whole approach. Scores: the hold margin
+when criterion hold ran, else minus the seal strain (the export's order). A round tool is the same solid at every
+roll: a candidate is then one pair, at roll 0 (the export's), with `any_roll` true (the robot may turn the tool
+about +Z as it likes). `PickIndex` holds the pairs' object-frame axes once per set; a query turns the world-frame
 direction and planes into the object frame and is then a few vector operations: the cone over every pair, the planes
 over the pairs inside the cone. A box lies on the normal side of a plane exactly when its lowest corner does, and the
 lowest corner's height is the centre's height minus the half extents weighted by |m|, where m is the plane normal in
@@ -21,7 +32,7 @@ the grasp frame (the brute-force test checks the 8 corners).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,7 +42,8 @@ from . import libm
 from .errors import InvalidParameterError
 from .export import Candidates, GraspSet
 from .gripper import GripperSpec
-from .transforms import matrix_to_quaternion_xyzw, roll_basis
+from .suction import SuctionSpec
+from .transforms import approach_basis, matrix_to_quaternion_xyzw, roll_basis
 
 __all__ = [
     "pick",
@@ -69,27 +81,35 @@ class PickIndex:
     contiguous component rows: the cone test over every pair is three multiply-adds over 12 bytes a pair (and no
     BLAS call, whose threads only contend on a busy host), with a slack that float32 cannot exceed; the pairs it
     keeps are then tested exactly in float64.
+
+    A parallel set has `width` (k,) per pair; a suction set has none (None) and `cup` (its cup and tool). `columns`
+    holds the per-candidate values each grasp reports (friction_margin_deg and hold_margin for jaws; hold_margin,
+    seal_strain and tilt_deg for a cup), in the response's order.
     """
 
-    gripper: GripperSpec
+    gripper: GripperSpec | SuctionSpec
     candidate: np.ndarray  # (k,) int64, index into the candidate NPZ
     roll_index: np.ndarray  # (k,) int16, index into roll_angles_rad
     roll_angles_rad: np.ndarray  # (R,)
     frames: np.ndarray  # (k, 12) float64
     approach: np.ndarray  # (3, k) float32, the Z axes (a conservative prefilter)
-    width: np.ndarray  # (k,) contact distance, metres
+    width: np.ndarray | None  # (k,) contact distance, metres; None for a suction set
     score: np.ndarray  # (k,)
     rank: np.ndarray  # (k,) int64, position in the quality order (score, candidate, roll)
     by_rank: np.ndarray  # (k,) int64, the pairs in the quality order (the inverse of rank)
     labels: np.ndarray  # (n, 2) int32 per candidate
     medoid: np.ndarray  # (n,) bool per candidate: an exported representative
-    friction_margin_deg: np.ndarray  # (n,)
-    hold_margin: np.ndarray | None  # (n,) when the set has one
-    score_source: str  # "quality" | "friction_margin_deg"
+    columns: dict[str, np.ndarray]  # name -> (n,) per candidate, reported with each grasp
+    score_source: str  # "quality" | "friction_margin_deg" | "hold_margin" | "seal_strain"
     candidates_total: int
+    cup: _Cup | None = None  # a suction set's cup and tool
 
     @classmethod
-    def build(cls, candidates: Candidates, gripper: GripperSpec) -> PickIndex:
+    def build(cls, candidates: Any, gripper: GripperSpec | SuctionSpec) -> PickIndex:
+        """The pairs of `candidates` (graspgen.export.Candidates for a parallel gripper; a suction set's candidates,
+        with one contact each, for a SuctionSpec)."""
+        if isinstance(gripper, SuctionSpec):
+            return cls._build_suction(candidates, gripper)
         ci, ri = np.nonzero(np.asarray(candidates.free_rolls, dtype=bool))
         if candidates.quality_terms is not None:
             from .quality import scores
@@ -99,30 +119,97 @@ class PickIndex:
         else:
             per_candidate = np.asarray(candidates.friction_margin_deg, dtype=np.float64)
             source = "friction_margin_deg"
-        score = per_candidate[ci]
-        rank = np.empty(len(ci), dtype=np.int64)
-        rank[np.lexsort((ri, ci, -score))] = np.arange(len(ci))  # position in the quality order
         axes = candidates.axes
         y0, z0 = roll_basis(axes)  # per candidate; the pairs combine them with their roll
         psi = np.asarray(candidates.roll_angles_rad, dtype=np.float64)[ri][:, None]
         c, s = libm.cos(psi), libm.sin(psi)
         y = c * y0[ci] + s * z0[ci]
         z = -s * y0[ci] + c * z0[ci]
+        columns = {"friction_margin_deg": np.asarray(candidates.friction_margin_deg, dtype=np.float64)}
+        hold = getattr(candidates, "hold_margin", None)
+        if hold is not None:
+            columns["hold_margin"] = np.asarray(hold, dtype=np.float64)
+        return cls._of_pairs(
+            gripper,
+            candidates,
+            ci,
+            ri,
+            np.stack([axes[ci], y, z, candidates.midpoints[ci]], axis=1),
+            per_candidate,
+            source,
+            columns,
+            candidates.widths,
+            None,
+        )
+
+    @classmethod
+    def _build_suction(cls, candidates: Any, spec: SuctionSpec) -> PickIndex:
+        contacts = np.asarray(candidates.contacts, dtype=np.float64)
+        if contacts.ndim != 3 or contacts.shape[1] != 1:
+            raise InvalidParameterError(
+                f"a suction cup picks from candidates with one contact each, got contacts of shape {contacts.shape}",
+                field="grasp_set",
+            )
+        free = np.asarray(candidates.free_rolls, dtype=bool)
+        if spec.round_tool:  # the same solid at every roll: one pair per candidate that has a free roll, at roll 0
+            ci = np.flatnonzero(free.any(axis=1))
+            ri = np.zeros(len(ci), dtype=np.int64)
+        else:
+            ci, ri = np.nonzero(free)
+        z = np.asarray(candidates.axes, dtype=np.float64)
+        x0, y0 = approach_basis(z)
+        psi = np.asarray(candidates.roll_angles_rad, dtype=np.float64)[ri][:, None]
+        x = libm.cos(psi) * x0[ci] + libm.sin(psi) * y0[ci]
+        zc = z[ci]
+        hold = getattr(candidates, "hold_margin", None)
+        seal = np.asarray(candidates.seal_strain, dtype=np.float64)
+        columns = {} if hold is None else {"hold_margin": np.asarray(hold, dtype=np.float64)}
+        columns["seal_strain"] = seal
+        columns["tilt_deg"] = np.asarray(candidates.tilt_deg, dtype=np.float64)
+        per_candidate, source = (columns["hold_margin"], "hold_margin") if hold is not None else (-seal, "seal_strain")
+        return cls._of_pairs(
+            spec,
+            candidates,
+            ci,
+            ri,
+            np.stack([x, np.cross(zc, x), zc, contacts[ci, 0]], axis=1),
+            per_candidate,
+            source,
+            columns,
+            None,
+            _Cup.of(spec),
+        )
+
+    @classmethod
+    def _of_pairs(
+        cls,
+        gripper: GripperSpec | SuctionSpec,
+        candidates: Any,
+        ci: np.ndarray,
+        ri: np.ndarray,
+        axes: np.ndarray,
+        per_candidate: np.ndarray,
+        source: str,
+        columns: dict[str, np.ndarray],
+        widths: np.ndarray | None,
+        cup: _Cup | None,
+    ) -> PickIndex:
+        """The index of the pairs (candidate `ci`, roll `ri`) whose grasp axes X, Y, Z and origin are `axes`
+        (k, 4, 3), scored by `per_candidate` (n,)."""
+        score = per_candidate[ci]
+        rank = np.empty(len(ci), dtype=np.int64)
+        rank[np.lexsort((ri, ci, -score))] = np.arange(len(ci))  # position in the quality order
+        z = axes[:, 2]
         # stored by approach direction (a 32 x 64 grid over cos(polar) and azimuth), so that the pairs inside a cone
         # lie in runs and gathering them reads memory in order; in the quality order within a cell
         polar = np.clip(((z[:, 2] + 1) * 16).astype(np.int64), 0, 31)
         azimuth = ((libm.arctan2(z[:, 1], z[:, 0]) + np.pi) * (64 / (2 * np.pi))).astype(np.int64) % 64
         order = np.lexsort((rank, polar * 64 + azimuth))
-        frames = np.empty((len(ci), 12), dtype=np.float64)
-        frames[:, 0:3] = axes[ci[order]]
-        frames[:, 3:6] = y[order]
-        frames[:, 6:9] = z[order]
-        frames[:, 9:12] = candidates.midpoints[ci[order]]
+        frames = np.ascontiguousarray(axes[order].reshape(len(order), 12))
         ci, ri, score, rank = ci[order].astype(np.int64), ri[order].astype(np.int16), score[order], rank[order]
-        n = len(candidates)
+        n = len(candidates.free_rolls)
         medoid = np.zeros(n, dtype=bool)
         medoid[np.asarray(candidates.medoids, dtype=np.int64)] = True
-        hold = getattr(candidates, "hold_margin", None)
         return cls(
             gripper=gripper,
             candidate=ci,
@@ -130,16 +217,16 @@ class PickIndex:
             roll_angles_rad=np.asarray(candidates.roll_angles_rad, dtype=np.float64),
             frames=frames,
             approach=np.ascontiguousarray(frames[:, 6:9].T, dtype=np.float32),
-            width=candidates.widths[ci],
+            width=None if widths is None else np.asarray(widths)[ci],
             score=score,
             rank=rank,
             by_rank=np.argsort(rank),
             labels=np.asarray(candidates.labels, dtype=np.int32),
             medoid=medoid,
-            friction_margin_deg=np.asarray(candidates.friction_margin_deg, dtype=np.float64),
-            hold_margin=None if hold is None else np.asarray(hold, dtype=np.float64),
+            columns=columns,
             score_source=source,
             candidates_total=n,
+            cup=cup,
         )
 
     def __len__(self) -> int:
@@ -148,11 +235,57 @@ class PickIndex:
     @property
     def nbytes(self) -> int:
         arrays: tuple[np.ndarray, ...]
-        arrays = (self.candidate, self.roll_index, self.frames, self.approach, self.width, self.score, self.rank)
-        arrays = (*arrays, self.by_rank)
-        extra = 0 if self.hold_margin is None else self.hold_margin.nbytes
-        per_candidate = self.labels.nbytes + self.medoid.nbytes + self.friction_margin_deg.nbytes + extra
-        return sum(a.nbytes for a in arrays) + per_candidate + 1024
+        arrays = (self.candidate, self.roll_index, self.frames, self.approach, self.score, self.rank, self.by_rank)
+        arrays = (*arrays, *(() if self.width is None else (self.width,)))
+        per_candidate = self.labels.nbytes + self.medoid.nbytes + sum(c.nbytes for c in self.columns.values())
+        cup = 0 if self.cup is None or self.cup.hull is None else self.cup.hull.nbytes
+        return sum(a.nbytes for a in arrays) + per_candidate + cup + 1024
+
+
+@dataclass(frozen=True)
+class _Cup:
+    """A suction cup and its tool in the grasp frame, as the plane test reads them: cylinders on the Z axis
+    (radius, z0, z1) with z0 < z1 <= 0 (the cup, then a cylinder tool), and a body tool's convex hull vertices
+    (h, 3), metres."""
+
+    cylinders: tuple[tuple[float, float, float], ...]
+    hull: np.ndarray | None
+
+    @classmethod
+    def of(cls, spec: SuctionSpec) -> _Cup:
+        h = spec.cup_height
+        cylinders = [(spec.cup_radius, -h, 0.0)]
+        hull = None
+        if spec.tool is not None:
+            cylinders.append((spec.tool.radius, -h - spec.tool.length, -h))
+        else:
+            assert spec.geometry is not None  # a suction spec has a tool or a body
+            hull = np.ascontiguousarray(spec.geometry.body.convex_hull.vertices, dtype=np.float64)
+        return cls(tuple(cylinders), hull)
+
+    def lowest(self, mx: np.ndarray, my: np.ndarray, mz: np.ndarray) -> np.ndarray:
+        """(k,): the smallest m . p over every point p of the cup and tool, for unit directions m = (mx, my, mz), each
+        (k,), of the grasp frame (a plane's normal): exact for the cylinders (a rim's lowest point) and the hull."""
+        side = np.sqrt(mx * mx + my * my)
+        out = np.full(len(mz), np.inf)
+        for r, z0, z1 in self.cylinders:
+            out = np.minimum(out, np.minimum(z0 * mz, z1 * mz) - r * side)
+        if self.hull is not None:
+            hx, hy, hz = (self.hull[:, j : j + 1] for j in range(3))
+            block = max(1024, _HULL_BLOCK // len(self.hull))
+            for a in range(0, len(mz), block):
+                sl = slice(a, a + block)
+                # (h, block) heights as multiply-adds reduced over the vertices (contiguous rows): a (k, 3) x (3, h)
+                # product is slow in BLAS with an inner size of 3, and a minimum along a short last axis in numpy
+                heights = hx * mx[sl]
+                heights += hy * my[sl]
+                heights += hz * mz[sl]
+                out[sl] = np.minimum(out[sl], heights.min(axis=0))
+        return out
+
+
+#: heights computed at once by the hull test ((hull vertices) x (pairs) floats)
+_HULL_BLOCK = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -312,7 +445,7 @@ class PickQuery:
 
 
 def pick(
-    grasp_set_or_candidates: GraspSet | Candidates | PickIndex,
+    grasp_set_or_candidates: Any,
     T_world_object: Any,
     *,
     approach: Mapping[str, Any] | None = None,
@@ -320,15 +453,18 @@ def pick(
     pregrasp_distance: float = DEFAULT_PREGRASP_DISTANCE,
     T_tcp_flange: Any = None,
     limit: int = DEFAULT_LIMIT,
-    gripper: GripperSpec | None = None,
+    gripper: GripperSpec | SuctionSpec | None = None,
 ) -> PickResult:
     """World-frame grasps of a set that fit the scene, best first (module docstring, CONTRACT.md).
 
+    `grasp_set_or_candidates`: a grasp set of either kind (GraspSet, or a suction run's set: it carries its gripper),
+    its candidates (graspgen.export.Candidates, or a suction set's candidates; these need `gripper`), or a PickIndex.
+
     `T_world_object` (4, 4): where the part lies. `approach`: `{"direction": (3,), "max_angle_deg": float}`, the
     grasp's +Z in the world must lie within the cone (None: any direction). `planes`: `[{"point": (3,), "normal":
-    (3,)}]` in the world frame, metres; fingers and palm at the grasp and at the pre-grasp stay on the normal side.
-    `T_tcp_flange` (4, 4): the flange relative to the TCP (grasp frame); adds `T_world_flange` and
-    `T_world_preflange`. A `Candidates` source needs `gripper`; a `GraspSet` carries its own.
+    (3,)}]` in the world frame, metres; fingers and palm (a suction cup and its tool) at the grasp and at the
+    pre-grasp stay on the normal side. `T_tcp_flange` (4, 4): the flange relative to the TCP (grasp frame); adds
+    `T_world_flange` and `T_world_preflange`.
     """
     query = PickQuery.parse(
         T_world_object,
@@ -341,14 +477,17 @@ def pick(
     return query.run(_index_of(grasp_set_or_candidates, gripper))
 
 
-def _index_of(source: Any, gripper: GripperSpec | None) -> PickIndex:
+def _index_of(source: Any, gripper: GripperSpec | SuctionSpec | None) -> PickIndex:
     if isinstance(source, PickIndex):
         return source
     if isinstance(source, GraspSet):
         return PickIndex.build(source.candidates, gripper or source.gripper)
-    if isinstance(source, Candidates):
+    own = getattr(source, "gripper", None)
+    if isinstance(own, SuctionSpec):  # a suction run's grasp set
+        return PickIndex.build(source.candidates, gripper or own)
+    if isinstance(source, Candidates) or hasattr(source, "free_rolls"):  # candidates of either kind
         if gripper is None:
-            raise InvalidParameterError("picking from Candidates needs the gripper spec", field="gripper")
+            raise InvalidParameterError("picking from candidates needs the gripper spec", field="gripper")
         return PickIndex.build(source, gripper)
     raise InvalidParameterError(f"cannot pick from a {type(source).__name__}", field="grasp_set")
 
@@ -400,28 +539,16 @@ def _filter(
     if P == 0 or n_cone == 0:
         return ok, cos_z, {"approach": removed_cone, "planes": 0, "per_plane": [0] * P}
     sub = near.T  # (12, k') view
-    solids = index.gripper.solids()
-    ft = solids.finger_thickness
-    width = index.width if inside_cone is None else index.width[inside_cone]
-    grasp_reach = width / 2 + ft  # outer face of a finger at the grasp, along X
-    open_reach = solids.open_width(width) / 2 + ft  # and at the pre-grasp
+    lowest_of = (
+        _cup_lowest(index, sub, distance) if index.cup is not None else _jaws_lowest(index, sub, inside_cone, distance)
+    )
     clear = np.ones(n_cone, dtype=bool)
     per_plane: list[int] = []
     for j in range(P):
         n_obj = R_wo.T @ normals[j]  # the plane normal in the object frame; m = (X.n, Y.n, Z.n) in the grasp frame
         h0 = _dot(sub[9:12], n_obj)
         h0 += normals[j] @ t_wo - offsets[j]  # the grasp origin's height above the plane
-        if solids.meshes is not None:
-            m = np.stack([_dot(sub[0:3], n_obj), _dot(sub[3:6], n_obj), _dot(sub[6:9], n_obj)], axis=1)
-            lowest = _lowest_of_meshes(solids, m, h0, h0 - distance * m[:, 2], width / 2, solids.open_width(width) / 2)
-        else:
-            mx, my, mz = np.abs(_dot(sub[0:3], n_obj)), np.abs(_dot(sub[3:6], n_obj)), _dot(sub[6:9], n_obj)
-            h_pre = h0 - distance * mz  # the pre-grasp origin's
-            side, palm = solids.plane_offsets(mx, my, mz)
-            lowest = np.minimum(h0 - mx * grasp_reach, h_pre - mx * open_reach) - side
-            if palm is not None:
-                lowest = np.minimum(lowest, np.minimum(h0, h_pre) + palm)
-        inside = lowest >= -PLANE_TOLERANCE
+        inside = lowest_of(n_obj, h0) >= -PLANE_TOLERANCE
         per_plane.append(n_cone - int(np.count_nonzero(inside)))
         clear &= inside
     if inside_cone is None:
@@ -430,6 +557,50 @@ def _filter(
         ok[inside_cone[~clear]] = False
     removed = {"approach": removed_cone, "planes": n_cone - int(np.count_nonzero(clear)), "per_plane": per_plane}
     return ok, cos_z, removed
+
+
+#: (plane normal in the object frame (3,), grasp origins' heights above the plane (k,)) -> lowest heights (k,)
+_Lowest = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+def _cup_lowest(index: PickIndex, sub: np.ndarray, distance: float) -> _Lowest:
+    """(n_obj (3,), h0 (k,)) -> (k,): the height above the plane of the lowest point of the cup and tool at the grasp
+    (origin height h0) and at the pre-grasp, for the pairs whose frames are `sub` (12, k)."""
+    cup = index.cup
+    assert cup is not None  # a suction index
+
+    def lowest(n_obj: np.ndarray, h0: np.ndarray) -> np.ndarray:
+        mx, my, mz = _dot(sub[0:3], n_obj), _dot(sub[3:6], n_obj), _dot(sub[6:9], n_obj)
+        out: np.ndarray = np.minimum(h0, h0 - distance * mz) + cup.lowest(mx, my, mz)
+        return out
+
+    return lowest
+
+
+def _jaws_lowest(index: PickIndex, sub: np.ndarray, inside_cone: np.ndarray | None, distance: float) -> _Lowest:
+    """(n_obj (3,), h0 (k,)) -> (k,): the height above the plane of the lowest point of the fingers and palm at the
+    grasp and of the open fingers and palm at the pre-grasp, for the pairs whose frames are `sub` (12, k)."""
+    gripper = index.gripper
+    assert isinstance(gripper, GripperSpec) and index.width is not None  # a parallel index
+    solids = gripper.solids()
+    ft = solids.finger_thickness
+    width = index.width if inside_cone is None else index.width[inside_cone]
+    grasp_reach = width / 2 + ft  # outer face of a finger at the grasp, along X
+    open_reach = solids.open_width(width) / 2 + ft  # and at the pre-grasp
+
+    def lowest(n_obj: np.ndarray, h0: np.ndarray) -> np.ndarray:
+        if solids.meshes is not None:
+            m = np.stack([_dot(sub[0:3], n_obj), _dot(sub[3:6], n_obj), _dot(sub[6:9], n_obj)], axis=1)
+            return _lowest_of_meshes(solids, m, h0, h0 - distance * m[:, 2], width / 2, solids.open_width(width) / 2)
+        mx, my, mz = np.abs(_dot(sub[0:3], n_obj)), np.abs(_dot(sub[3:6], n_obj)), _dot(sub[6:9], n_obj)
+        h_pre = h0 - distance * mz  # the pre-grasp origin's
+        side, palm = solids.plane_offsets(mx, my, mz)
+        out: np.ndarray = np.minimum(h0 - mx * grasp_reach, h_pre - mx * open_reach) - side
+        if palm is not None:
+            out = np.minimum(out, np.minimum(h0, h_pre) + palm)
+        return out
+
+    return lowest
 
 
 #: pairs per block of the mesh gripper's lowest-point products ((block, hull vertices) floats each)
@@ -511,15 +682,18 @@ def _grasps_out(
     T_wp = T_wg.copy()
     T_wp[:, :3, 3] -= distance * T_wg[:, :3, 2]
     cand = index.candidate[chosen]
-    width = index.width[chosen]
     g = index.gripper
     columns: dict[str, list[Any]] = {
         "T_world_grasp": T_wg.tolist(),
         "position": T_wg[:, :3, 3].tolist(),
         "quaternion_xyzw": [matrix_to_quaternion_xyzw(R).tolist() for R in T_wg[:, :3, :3]],
         "T_world_pregrasp": T_wp.tolist(),
-        "width": width.tolist(),
-        "open_width": g.solids().open_width(width).tolist(),
+    }
+    if index.width is not None and isinstance(g, GripperSpec):
+        width = index.width[chosen]
+        columns["width"] = width.tolist()
+        columns["open_width"] = g.solids().open_width(width).tolist()
+    columns |= {
         "roll_deg": np.degrees(index.roll_angles_rad[index.roll_index[chosen]]).tolist(),
         "roll_index": index.roll_index[chosen].tolist(),
         "approach_angle_deg": np.degrees(libm.arccos(np.clip(cos_z[chosen], -1.0, 1.0))).tolist(),
@@ -527,10 +701,10 @@ def _grasps_out(
         "cluster": index.labels[cand].tolist(),
         "medoid": index.medoid[cand].tolist(),
         "score": index.score[chosen].tolist(),
-        "friction_margin_deg": index.friction_margin_deg[cand].tolist(),
     }
-    if index.hold_margin is not None:
-        columns["hold_margin"] = index.hold_margin[cand].tolist()
+    if isinstance(g, SuctionSpec) and g.round_tool:
+        columns["any_roll"] = [True] * m
+    columns |= {name: values[cand].tolist() for name, values in index.columns.items()}
     if T_tf is not None:
         columns["T_world_flange"] = (T_wg @ T_tf).tolist()
         columns["T_world_preflange"] = (T_wp @ T_tf).tolist()

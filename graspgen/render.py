@@ -1,4 +1,6 @@
-"""Pictures of a grasp set: the part shaded, the selected grippers at their poses in cluster colours, four views.
+"""Pictures of a grasp set: the part shaded, the selected grippers at their poses in cluster colours, four views. A
+parallel gripper is drawn as its fingers (at the grasp's width) and palm or body; a suction cup as the cup (a
+cylinder from the lip at the contact back along -Z) and the tool behind it (a cylinder, or its body mesh).
 
 Headless by construction: a small z-buffer rasteriser (numba) with flat Lambert shading under a headlight, silhouette
 outlines from depth jumps, 2x supersampling, written to PNG with Pillow. No GPU, display, OpenGL/EGL/OSMesa or
@@ -18,9 +20,11 @@ import trimesh
 from numba import njit
 
 from .gripper import GripperSpec
+from .kinds import gripper_from_dict
 from .recording import cluster_colours
+from .suction import SuctionSpec
 
-__all__ = ["VIEWS", "DEFAULT_SIZE", "render_grasp_set", "render_image", "gripper_triangles"]
+__all__ = ["VIEWS", "DEFAULT_SIZE", "render_grasp_set", "render_image", "gripper_triangles", "suction_triangles"]
 
 #: the fixed viewpoints: name, direction from the scene towards the camera, the image's up direction
 VIEWS: tuple[tuple[str, tuple[float, float, float], tuple[float, float, float]], ...] = (
@@ -50,6 +54,8 @@ _OUTLINE_DARKEN = 0.45
 #: grippers in front of the part are drawn see-through with this opacity, behind it faintly
 _GRIPPER_ALPHA = 0.6
 _HIDDEN_ALPHA = 0.12
+#: sides of the polygons that draw a suction cup's and tool's cylinders
+_CYLINDER_SECTIONS = 32
 
 
 @njit(cache=True, nogil=True)
@@ -109,7 +115,31 @@ def gripper_triangles(spec: GripperSpec, T_object_grasp: np.ndarray, width: floa
     return np.vstack(verts), np.vstack(faces).astype(np.int64)
 
 
-def _layers(mesh: trimesh.Trimesh, export: dict[str, Any], gripper: GripperSpec | None = None) -> tuple[_Layer, _Layer]:
+def suction_triangles(spec: SuctionSpec, T_object_grasp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (v, 3) and faces (f, 3) of a suction cup and its tool in the object frame: the cup a cylinder of
+    cup_radius from the lip (z = 0 of the grasp frame, at the contact) back to -cup_height, the tool a cylinder from
+    there back by its length, or its body mesh (grasp frame)."""
+    h = spec.cup_height
+    cup = trimesh.creation.cylinder(radius=spec.cup_radius, height=h, sections=_CYLINDER_SECTIONS)
+    parts = [(np.asarray(cup.vertices) + (0.0, 0.0, -h / 2), np.asarray(cup.faces))]
+    if spec.tool is not None:
+        length = spec.tool.length
+        tool = trimesh.creation.cylinder(radius=spec.tool.radius, height=length, sections=_CYLINDER_SECTIONS)
+        parts.append((np.asarray(tool.vertices) + (0.0, 0.0, -h - length / 2), np.asarray(tool.faces)))
+    else:
+        assert spec.geometry is not None  # a suction spec has a tool or a body
+        parts.append((np.asarray(spec.geometry.vertices), np.asarray(spec.geometry.faces)))
+    verts, faces, offset = [], [], 0
+    for v, f in parts:
+        verts.append(v @ T_object_grasp[:3, :3].T + T_object_grasp[:3, 3])
+        faces.append(f + offset)
+        offset += len(v)
+    return np.vstack(verts), np.vstack(faces).astype(np.int64)
+
+
+def _layers(
+    mesh: trimesh.Trimesh, export: dict[str, Any], gripper: GripperSpec | SuctionSpec | None = None
+) -> tuple[_Layer, _Layer]:
     """Two layers of triangles, the part and the grippers: each (vertices (v, 3), faces (f, 3), colours (f, 3))."""
     part = (
         np.asarray(mesh.vertices, dtype=np.float64),
@@ -119,11 +149,15 @@ def _layers(mesh: trimesh.Trimesh, export: dict[str, Any], gripper: GripperSpec 
     verts, faces, cols = [np.zeros((0, 3))], [np.zeros((0, 3), dtype=np.int64)], [np.zeros((0, 3))]
     grasps = export.get("grasps") or []
     if grasps:
-        spec = gripper if gripper is not None else GripperSpec.from_dict(export["gripper"])
+        spec = gripper if gripper is not None else gripper_from_dict(export["gripper"])
         palette = cluster_colours(np.array([g["cluster"][0] for g in grasps])) / 255.0
         offset = 0
         for g, colour in zip(grasps, palette, strict=True):
-            v, f = gripper_triangles(spec, np.asarray(g["pose"], dtype=np.float64), float(g["width"]))
+            pose = np.asarray(g["pose"], dtype=np.float64)
+            if isinstance(spec, SuctionSpec):
+                v, f = suction_triangles(spec, pose)
+            else:
+                v, f = gripper_triangles(spec, pose, float(g["width"]))
             verts.append(v)
             faces.append(f + offset)
             cols.append(np.tile(colour, (len(f), 1)))
@@ -192,10 +226,11 @@ def render_image(
     export: dict[str, Any],
     *,
     size: tuple[int, int] = DEFAULT_SIZE,
-    gripper: GripperSpec | None = None,
+    gripper: GripperSpec | SuctionSpec | None = None,
 ) -> np.ndarray:
     """The picture as an (H, W, 3) uint8 array: the four `VIEWS` in a 2 x 2 grid, each labelled. `gripper`: the
-    export's gripper spec, needed when it has geometry (the export names its mesh files, it does not hold them)."""
+    export's gripper spec (either kind), needed when it has geometry (the export names its mesh files, it does not
+    hold them)."""
     from PIL import Image, ImageDraw
 
     W, H = _check_size(size)
@@ -235,7 +270,7 @@ def render_grasp_set(
     export: dict[str, Any],
     *,
     size: tuple[int, int] = DEFAULT_SIZE,
-    gripper: GripperSpec | None = None,
+    gripper: GripperSpec | SuctionSpec | None = None,
 ) -> bytes:
     """PNG bytes of `export` (a grasp_set/1 dict) drawn on `mesh` (metres, the object's model frame); `gripper` as
     for render_image."""

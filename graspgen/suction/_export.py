@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 
@@ -70,7 +70,7 @@ class SuctionCandidates:
         }
 
 
-def load_suction_candidates(path: str | os.PathLike[str]) -> SuctionCandidates:
+def load_suction_candidates(path: str | os.PathLike[str] | IO[bytes]) -> SuctionCandidates:
     """Read a suction candidate NPZ back, checking shapes so that a damaged file fails with a clear reason."""
     try:
         with np.load(path, allow_pickle=False) as z:

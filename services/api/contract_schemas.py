@@ -1,9 +1,10 @@
-"""Typed OpenAPI documents of the contract's payloads: the gripper spec, job params, the grasp_set/1 export and the
-pick query (CONTRACT.md; docs/API.md explains frames and units).
+"""Typed OpenAPI documents of the contract's payloads: the gripper specs of both kinds, job params, the grasp_set/1
+export and the pick query (CONTRACT.md; docs/API.md explains frames and units).
 
-GripperSpec, JobParams and GraspSetExport *document*: the routes still hand the raw JSON to graspgen
-(GripperSpec.from_dict, Params.from_dict), which stays the single source of validation and of its messages; the
-schemas state the same rules. JobParams is built from the declared fields of graspgen's Params and QualityOptions
+GripperSpec (kind `parallel`), SuctionGripperSpec (kind `suction`), their union AnyGripperSpec, JobParams and
+GraspSetExport *document*: the routes still hand the raw JSON to graspgen (graspgen.kinds.gripper_from_dict,
+Params.from_dict), which stays the single source of validation and of its messages; the schemas state the same
+rules. JobParams is built from the declared fields of graspgen's Params and QualityOptions
 (`job_params_model`): each parameter's type, range, choices and default are params.py's. The export models allow extra
 fields, so fields the library adds pass through. PickRequest validates shapes and types; the numbers (pose
 orthonormality, non-zero vectors, ranges) are checked by graspgen.pick.PickQuery with the same rules as the Python API.
@@ -14,17 +15,24 @@ from __future__ import annotations
 import json
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, create_model, model_validator
+from pydantic import BaseModel, ConfigDict, Field, RootModel, create_model, model_validator
 
 from graspgen.examples import EXAMPLE_GRIPPER
 from graspgen.gripper import SLUG_PATTERN
 from graspgen.params import ParamOption, Params, QualityOptions, param_options
 from graspgen.pick import DEFAULT_LIMIT, DEFAULT_PREGRASP_DISTANCE, MAX_LIMIT, MAX_PLANES
+from graspgen.suction import MAX_VACUUM
+
+from .schemas import SUCTION_SPEC_EXAMPLE
 
 __all__ = [
     "GripperSpec",
     "GripperGeometry",
     "GripperPad",
+    "SuctionGripperSpec",
+    "SuctionTool",
+    "SuctionGeometry",
+    "AnyGripperSpec",
     "JobParams",
     "job_params_model",
     "GraspSetExport",
@@ -117,6 +125,61 @@ class GripperSpec(BaseModel):
     )
 
 
+class SuctionTool(BaseModel):
+    """The cylinder behind the cup, on the grasp frame's Z axis from z = -cup_height back to -(cup_height + length)."""
+
+    model_config = ConfigDict(extra="forbid")
+    radius: float = Field(gt=0, le=2, description="m")
+    length: float = Field(gt=0, le=2, description="m")
+
+
+class SuctionGeometry(BaseModel):
+    """The tool behind the cup as a body mesh in the grasp frame (origin at the lip's centre, +Z the approach, the
+    body at z <= 0): a file name, relative to the spec file (CLI, Python) or the name of a multipart file part (HTTP);
+    STL, OBJ, PLY, OFF or GLB, watertight with outward normals, at most 200,000 triangles."""
+
+    model_config = ConfigDict(extra="forbid")
+    units: Literal["mm", "cm", "m", "in"] = Field(description="the unit of the mesh file")
+    body: str = Field(description="the tool's mesh (everything behind the cup)", examples=["tool.stl"])
+    sha256: dict[str, str] | None = Field(
+        None,
+        description="file name -> hex sha256; stored specs and exports carry it; when given, the file must match",
+    )
+
+
+class SuctionGripperSpec(BaseModel):
+    """A vacuum cup and the tool behind it (CONTRACT.md "Suction cups"), lengths in metres. Grasp frame: origin at
+    the contact (the lip's centre on the surface), +Z the approach into the part along the cup's axis, the cup from
+    z = 0 back to -cup_height, the tool behind it. The tool is a cylinder (`tool`) or a body mesh (`geometry`, sent
+    as multipart with its file), exactly one of them. Unknown fields are refused."""
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [SUCTION_SPEC_EXAMPLE]})
+    name: str = Field(pattern=SLUG, description="slug", examples=["cup-30"])
+    kind: Literal["suction"] = Field(description="required: a spec without kind is a parallel gripper")
+    cup_radius: float = Field(gt=0, le=2, description="radius of the sealing lip, m")
+    cup_height: float = Field(gt=0, le=2, description="lip to cup base along the cup's axis (the bellows' travel), m")
+    max_strain: float = Field(gt=0, lt=1, description="how far the lip may stretch or compress (0.1 = 10 %)")
+    vacuum: float = Field(
+        gt=0, le=MAX_VACUUM, description="pressure difference the pump holds under a sealed cup, Pa (<= 1 atm)"
+    )
+    friction: float = Field(gt=0, le=10, description="Coulomb coefficient lip/part (a job's `friction` overrides it)")
+    # no `| None`: the tool or the geometry is left out, never null (graspgen refuses null)
+    tool: SuctionTool = Field(None, description="the cylinder behind the cup (or `geometry`)")  # type: ignore[assignment]
+    geometry: SuctionGeometry = Field(None, description="the tool as a body mesh (or `tool`)")  # type: ignore[assignment]
+    pregrasp_clearance: float = Field(ge=0, le=2, description="stand-off of the pre-grasp pose along -Z, m")
+
+    @model_validator(mode="after")
+    def _one_tool(self) -> SuctionGripperSpec:
+        if (self.tool is None) == (self.geometry is None):
+            raise ValueError("give the tool as a cylinder (tool) or a body mesh (geometry), exactly one of them")
+        return self
+
+
+class AnyGripperSpec(RootModel[GripperSpec | SuctionGripperSpec]):
+    """A gripper spec of either kind: a parallel-jaw gripper (GripperSpec, `kind` "parallel" or left out) or a
+    suction cup (SuctionGripperSpec, `kind` "suction")."""
+
+
 # -- job params -------------------------------------------------------------------------------------------------------
 #: what a job adds to a parameter's description (the service's own rules beyond graspgen's)
 JOB_NOTES = {"mass_kg": "a job's default: the object version's mass_kg unless density is given"}
@@ -201,15 +264,24 @@ class ExportStats(BaseModel):
 
 
 class ExportGrasp(BaseModel):
-    """One exported grasp (a cluster representative), object frame, metres."""
+    """One exported grasp (a cluster representative), object frame, metres. A parallel gripper's grasp has two
+    contacts, its width and friction margin; a suction cup's has one contact (the lip's centre on the surface), its
+    approach, seal strain and tilt."""
 
     model_config = ConfigDict(extra="allow")
     pose: Matrix4 = Field(description="T_object_grasp at the roll `roll_deg`, row-major")
-    width: float = Field(description="contact distance, m")
-    contacts: list[Vec3] = Field(description="the two contacts (object frame, m); +X points from 0 to 1")
+    width: float | None = Field(None, description="parallel: contact distance, m")
+    contacts: list[Vec3] = Field(
+        description="object frame, m: the two contacts of a parallel grasp (+X points from 0 to 1), the one contact "
+        "of a suction grasp (the pose's origin)"
+    )
     normals: list[Vec3] = Field(description="outward unit surface normals at the contacts")
-    friction_margin_deg: float = Field(description="cone half-angle / safety factor minus the worse contact angle")
-    free_rolls_deg: list[float] = Field(description="every collision-free roll about +X, degrees")
+    friction_margin_deg: float | None = Field(
+        None, description="parallel: cone half-angle / safety factor minus the worse contact angle"
+    )
+    free_rolls_deg: list[float] = Field(
+        description="every collision-free roll, degrees: about +X (parallel), about +Z (suction)"
+    )
     cluster: list[int] = Field(description="[translation cluster, direction cluster]")
     cluster_size: int = Field(description="candidates this grasp represents")
     roll_deg: float | None = Field(None, description="the roll the pose uses")
@@ -218,7 +290,10 @@ class ExportGrasp(BaseModel):
     medoid: int | None = Field(None, description="the cluster's medoid this grasp stands in for (best-near-medoid)")
     quality: dict[str, float] | None = Field(None, description="score and terms (docs/QUALITY.md)")
     sim: dict[str, Any] | None = Field(None, description="MuJoCo validation of this grasp")
-    hold_margin: float | None = Field(None, description="criterion (e): load resisted / load required (>= 1)")
+    hold_margin: float | None = Field(None, description="criterion hold: load resisted / load required (>= 1)")
+    approach: Vec3 | None = Field(None, description="suction: the approach (the pose's +Z, into the part), unit")
+    seal_strain: float | None = Field(None, description="suction: the lip's largest strain (<= max_strain)")
+    tilt_deg: float | None = Field(None, description="suction: the approach's angle to the surface's normal")
 
 
 class GraspSetExport(BaseModel):
@@ -228,7 +303,9 @@ class GraspSetExport(BaseModel):
     format: Literal["graspgen.grasp_set/1"]
     units: Literal["m"]
     object: ExportObject
-    gripper: dict[str, Any] = Field(description="the gripper spec (GripperSpec) the set was computed for")
+    gripper: dict[str, Any] = Field(
+        description="the gripper spec (AnyGripperSpec) the set was computed for; its `kind` says which"
+    )
     params: dict[str, Any] = Field(description="the run's parameters (JobParams), friction resolved")
     stats: ExportStats
     grasps: list[ExportGrasp] = Field(description="representatives, best first within each translation cluster")
@@ -277,7 +354,7 @@ class PickRequest(BaseModel):
         default_factory=list,
         max_length=MAX_PLANES,
         description="half-spaces (bin floor, walls): the fingers and palm at the grasp and the open fingers and palm "
-        "at the pre-grasp must lie on each plane's normal side",
+        "at the pre-grasp (a suction cup: the cup and the tool at both) must lie on each plane's normal side",
     )
     pregrasp_distance: float = Field(
         DEFAULT_PREGRASP_DISTANCE, ge=0, le=2, description="m: the pre-grasp is the grasp retreated along its -Z"
@@ -295,26 +372,35 @@ class PickRequest(BaseModel):
 
 
 class PickedGrasp(BaseModel):
-    """One feasible (candidate, roll), world frame, metres."""
+    """One feasible (candidate, roll), world frame, metres. A parallel gripper's grasp has width, open_width and
+    friction_margin_deg; a suction cup's has seal_strain and tilt_deg instead (its position is the contact)."""
 
     model_config = ConfigDict(extra="allow")
     T_world_grasp: Matrix4 = Field(description="T_world_object @ T_object_grasp(candidate, roll)")
-    position: Vec3 = Field(description="the grasp origin (contact midpoint) in the world, m")
+    position: Vec3 = Field(
+        description="the grasp origin in the world, m: the contacts' midpoint (parallel), the contact (suction)"
+    )
     quaternion_xyzw: list[float] = Field(min_length=4, max_length=4, description="rotation of T_world_grasp, w >= 0")
     T_world_pregrasp: Matrix4 = Field(description="the grasp retreated pregrasp_distance along its -Z")
     T_world_flange: Matrix4 | None = Field(None, description="T_world_grasp @ T_tcp_flange (when given)")
     T_world_preflange: Matrix4 | None = Field(None, description="T_world_pregrasp @ T_tcp_flange (when given)")
-    width: float = Field(description="contact distance, m")
-    open_width: float = Field(description="opening at the pre-grasp: min(width + pregrasp_clearance, stroke), m")
-    roll_deg: float = Field(description="roll about the closing axis +X (CONTRACT.md roll convention)")
+    width: float | None = Field(None, description="parallel: contact distance, m")
+    open_width: float | None = Field(
+        None, description="parallel: opening at the pre-grasp: min(width + pregrasp_clearance, stroke), m"
+    )
+    roll_deg: float = Field(
+        description="roll about the closing axis +X (parallel) or the cup's axis +Z (suction), CONTRACT.md"
+    )
     roll_index: int = Field(description="index into the NPZ's roll_angles_rad")
     approach_angle_deg: float = Field(description="angle between the grasp's +Z and approach.direction")
     candidate: int = Field(description="row in the candidate NPZ")
     cluster: list[int] = Field(description="[translation cluster, direction cluster]")
     medoid: bool = Field(description="the candidate is one of the exported representatives")
     score: float = Field(description="the ranking score (see the response's `score`), higher is better")
-    friction_margin_deg: float
-    hold_margin: float | None = Field(None, description="criterion (e) margin, when the set has one")
+    friction_margin_deg: float | None = Field(None, description="parallel: the candidate's friction margin")
+    hold_margin: float | None = Field(None, description="criterion hold's margin, when the set has one")
+    seal_strain: float | None = Field(None, description="suction: the lip's largest strain (<= max_strain)")
+    tilt_deg: float | None = Field(None, description="suction: the approach's angle to the surface's normal")
 
 
 class PickRemoved(BaseModel):
@@ -359,8 +445,9 @@ class PickResponse(BaseModel):
     version: int = Field(description="the set's version within its object and gripper pair")
     considered: int = Field(description="(candidate, free roll) pairs of the set")
     feasible: int = Field(description="pairs that pass the cone and every plane")
-    score: Literal["quality", "friction_margin_deg"] = Field(
-        description="what `score` is: the quality score when the set has quality terms, else the friction margin"
+    score: Literal["quality", "friction_margin_deg", "hold_margin", "seal_strain"] = Field(
+        description="what `score` is: parallel sets: the quality score when the set has quality terms, else the "
+        "friction margin; suction sets: the hold margin when criterion hold ran, else minus the seal strain"
     )
     removed: PickRemoved
     grasps: list[PickedGrasp] = Field(description="up to `limit`, best first (score, then smaller approach angle)")
@@ -368,4 +455,10 @@ class PickResponse(BaseModel):
 
 
 #: schemas added to the OpenAPI components by name (routes that take or give raw JSON refer to them)
-DOCUMENT_MODELS: tuple[type[BaseModel], ...] = (GripperSpec, JobParams, GraspSetExport)
+DOCUMENT_MODELS: tuple[type[BaseModel], ...] = (
+    AnyGripperSpec,
+    GripperSpec,
+    SuctionGripperSpec,
+    JobParams,
+    GraspSetExport,
+)

@@ -58,17 +58,18 @@ def render_png(
     size: tuple[int, int],
     gripper_files: dict[str, bytes] | None = None,
 ) -> bytes:  # pragma: no cover - runs in a render process (tested through the API)
-    """Draw one preview (runs in a render process): the part from its stored bytes, the export's grippers (a
-    gripper from CAD with its mesh files, `gripper_files` by the names its geometry gives)."""
+    """Draw one preview (runs in a render process): the part from its stored bytes, the export's grippers of either
+    kind (a gripper from CAD or a suction tool's body with its mesh files, `gripper_files` by the names its geometry
+    gives)."""
     import json
 
-    from graspgen.gripper import GripperSpec
+    from graspgen.kinds import gripper_from_dict
     from graspgen.parts import load_part
     from graspgen.render import render_grasp_set
 
     part = load_part(part_bytes, units=units, file_type=file_type)
     export = json.loads(export_json)
-    gripper = GripperSpec.from_dict(export["gripper"], files=gripper_files) if gripper_files else None
+    gripper = gripper_from_dict(export["gripper"], files=gripper_files) if gripper_files else None
     return render_grasp_set(part.surface_mesh(), export, size=size, gripper=gripper)
 
 

@@ -17,6 +17,18 @@ ID_MAX = 2**31 - 1
 
 # Any: pydantic types json_schema_extra as JSON values, which dict[str, object] is not to mypy
 _GRIPPER_EXAMPLE: dict[str, Any] = dict(EXAMPLE_GRIPPER)
+#: examples/cup-30.json, the contract's suction cup
+SUCTION_SPEC_EXAMPLE: dict[str, Any] = {
+    "name": "cup-30",
+    "kind": "suction",
+    "cup_radius": 0.015,
+    "cup_height": 0.02,
+    "max_strain": 0.1,
+    "vacuum": 60000,
+    "friction": 0.5,
+    "tool": {"radius": 0.012, "length": 0.12},
+    "pregrasp_clearance": 0.03,
+}
 PARAMS_EXAMPLE: dict[str, Any] = {"points": 10000, "safety_factor": 1.5, "rolls": 16, "k1": 16, "k2": 4, "seed": 0}
 
 
@@ -96,8 +108,9 @@ class ObjectPage(Page):
 
 
 # -- grippers ---------------------------------------------------------------------------------------------------------
-#: documented by contract_schemas.GripperSpec; stored specs are GripperSpec.to_dict() of graspgen's validated spec
-_SPEC_DOC = WithJsonSchema({"allOf": [{"$ref": "#/components/schemas/GripperSpec"}]})
+#: documented by contract_schemas.AnyGripperSpec (either kind); stored specs are the to_dict() of graspgen's validated
+#: spec of their kind (graspgen.kinds)
+_SPEC_DOC = WithJsonSchema({"allOf": [{"$ref": "#/components/schemas/AnyGripperSpec"}]})
 
 
 class GripperFileOut(BaseModel):
@@ -337,10 +350,10 @@ class GraspSetPage(Page):
 class GraspOut(BaseModel):
     rank: int
     pose: list[list[float]]
-    width: float
-    contacts: list[list[float]]
+    width: float | None = Field(description="a parallel grasp's contact distance, m; null for a suction grasp")
+    contacts: list[list[float]] = Field(description="two contacts (parallel), one (suction: the pose's origin)")
     normals: list[list[float]]
-    friction_margin_deg: float
+    friction_margin_deg: float | None = Field(description="a parallel grasp's friction margin; null for suction")
     free_rolls_deg: list[float]
     cluster: list[int]
     cluster_size: int

@@ -260,10 +260,13 @@ class Grasp(Base):
     rank: Mapped[int]
     #: T_object_grasp, 4x4 row-major
     pose: Mapped[list[Any]]
-    width: Mapped[float] = mapped_column(Float)
+    #: a parallel grasp's contact distance; None for a suction grasp (one contact)
+    width: Mapped[float | None] = mapped_column(Float)
+    #: the two contacts of a parallel grasp, the one contact of a suction grasp
     contacts: Mapped[list[Any]]
     normals: Mapped[list[Any]]
-    friction_margin_deg: Mapped[float] = mapped_column(Float)
+    #: a parallel grasp's friction margin; None for a suction grasp
+    friction_margin_deg: Mapped[float | None] = mapped_column(Float)
     free_rolls_deg: Mapped[list[Any]]
     cluster_translation: Mapped[int]
     cluster_direction: Mapped[int]

@@ -12,8 +12,9 @@ from sqlalchemy.orm import Session
 from graspgen.errors import InvalidParameterError
 from graspgen.params import Params, from_job
 from services.api.schemas import ID_MAX, PARAMS_DOC, NoNulModel
-from services.common.grippers import file_digests
+from services.common.grippers import file_digests, gripper_kind
 from services.common.models import GraspSet as GraspSetRow
+from services.common.models import GripperVersion
 
 from .kind import JobKind, RunContext
 from .params import QUALITY_PARAMS, split_quality
@@ -62,6 +63,16 @@ def resolve(session: Session, body: ClusterJobRequest) -> dict[str, Any]:
     Params.from_dict(given)  # a bad k1, k2, seed or density is named before anything about the source set
     if source.candidates_key is None:
         raise ApiError(422, "no-candidates", f"grasp set {source.id} has no stored candidates", field="grasp_set")
+    gv = session.get(GripperVersion, source.gripper_version_id)
+    if gv is not None and gripper_kind(gv.spec) != "parallel":
+        # graspgen.recluster reads a parallel gripper's candidates; a suction set is clustered by a new generate job
+        raise ApiError(
+            422,
+            "unsupported-gripper",
+            f"grasp set {source.id} is a {gripper_kind(gv.spec)} set: cluster jobs re-cluster parallel sets only; "
+            "submit a generate job with the new k1, k2, seed instead",
+            field="grasp_set",
+        )
     # quality options are the cluster job's own, not inherited from the source set
     base, _ = split_quality(source.params)
     if "density" in given:

@@ -10,10 +10,11 @@ from sqlalchemy.orm import Session
 
 from graspgen.params import Params, QualityOptions, from_job
 from services.api.schemas import ID_MAX, PARAMS_DOC, PARAMS_EXAMPLE, SLUG, BulkItem, NoNulModel
+from services.common.grippers import gripper_kind
 from services.common.versions import GRIPPERS, OBJECTS, Versioned, find_version
 
 from .kind import JobKind, RunContext
-from .params import JOB_PARAM_NAMES, split_quality
+from .params import JOB_PARAM_NAMES, check_for_kind, split_quality
 
 if TYPE_CHECKING:
     from graspgen.export import GraspSet
@@ -71,13 +72,16 @@ def _version(session: Session, kind: Versioned, name: str, version: int | None) 
 def _effective_params(
     given: dict[str, Any] | None, spec: dict[str, Any], mass_kg: float | None = None
 ) -> dict[str, Any]:
-    """graspgen.Params with friction resolved from the gripper and the object version's mass when the job gives
-    neither mass_kg nor density: the stored params say exactly what the run used."""
+    """graspgen.Params with friction resolved from the gripper (a parallel gripper's or a suction cup's) and the
+    object version's mass when the job gives neither mass_kg nor density: the stored params say exactly what the run
+    used."""
     core, quality = split_quality(given)
     if mass_kg is not None and core.get("mass_kg") is None and core.get("density") is None:
         core["mass_kg"] = mass_kg
     p = Params.from_dict(core)  # InvalidParameterError -> 422
-    return {**p.to_dict(friction=p.friction if p.friction is not None else float(spec["friction"])), **quality}
+    effective = {**p.to_dict(friction=p.friction if p.friction is not None else float(spec["friction"])), **quality}
+    check_for_kind(gripper_kind(spec), effective)  # params the gripper's kind cannot use: 422 now, not a failed job
+    return effective
 
 
 def resolve(session: Session, body: GenerateJobRequest | BulkItem) -> dict[str, Any]:

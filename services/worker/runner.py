@@ -546,15 +546,17 @@ class _Progress:
 
 
 def _grasp_row(grasp_set_id: int, rank: int, g: dict[str, Any]) -> dict[str, Any]:
+    """The grasps row of an exported grasp of either kind (a suction grasp has no width or friction margin)."""
     cluster = g.get("cluster") or [0, 0]
+    width, margin = g.get("width"), g.get("friction_margin_deg")
     return {
         "grasp_set_id": grasp_set_id,
         "rank": rank,
         "pose": g["pose"],
-        "width": float(g["width"]),
+        "width": None if width is None else float(width),
         "contacts": g["contacts"],
         "normals": g["normals"],
-        "friction_margin_deg": float(g["friction_margin_deg"]),
+        "friction_margin_deg": None if margin is None else float(margin),
         "free_rolls_deg": g["free_rolls_deg"],
         "cluster_translation": int(cluster[0]),
         "cluster_direction": int(cluster[1]),

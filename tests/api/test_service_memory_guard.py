@@ -98,3 +98,20 @@ def test_the_worker_fails_a_queued_job_above_its_budget_once(make_service, box_p
     # a redelivered message finds the job finished: not run again, still one attempt
     assert runner.run(jid) == "failed"
     assert svc.get(f"/v1/jobs/{jid}").json()["attempts"] == 1
+
+
+def test_a_suction_job_is_estimated_linear_in_the_points(make_service):
+    """A cup keeps at most one candidate per point and approach: the estimate is the base plus the sampling, and the
+    largest count that fits is named without a probe run."""
+    from tests.grippers import CUP
+
+    budget = memory.BASE_BYTES + memory.BYTES_PER_SAMPLED_POINT * 50_000
+    svc = make_service(budget)
+    obj, cup = slug("mem"), slug("cup")
+    assert svc.upload(obj, box_stl((80.0, 60.0, 30.0))).status_code == 201
+    assert svc.post("/v1/grippers", json={**CUP, "name": cup}).status_code == 201
+    before = svc.row_counts()
+    r = svc.post("/v1/jobs", json={"object": obj, "gripper": cup, "params": {"points": 100_000}})
+    assert r.status_code == 422 and r.json()["code"] == "memory-limit", r.text
+    assert r.json()["max_points"] == 50_000 and svc.row_counts() == before
+    assert svc.post("/v1/jobs", json={"object": obj, "gripper": cup, "params": {"points": 50_000}}).status_code == 202

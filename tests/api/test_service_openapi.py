@@ -143,7 +143,13 @@ def test_contract_payloads_are_typed_with_units_and_examples(schema):
     assert export["properties"]["format"]["const"] == "graspgen.grasp_set/1"
     assert components["ExportGrasp"]["additionalProperties"] is True  # new library fields pass through
     gripper_body = schema["paths"]["/v1/grippers"]["post"]["requestBody"]["content"]["application/json"]["schema"]
-    assert gripper_body["allOf"] == [{"$ref": "#/components/schemas/GripperSpec"}]
+    assert gripper_body["allOf"] == [{"$ref": "#/components/schemas/AnyGripperSpec"}]
+    kinds = {ref["$ref"] for ref in components["AnyGripperSpec"]["anyOf"]}
+    assert kinds == {"#/components/schemas/GripperSpec", "#/components/schemas/SuctionGripperSpec"}
+    cup = components["SuctionGripperSpec"]
+    assert cup["additionalProperties"] is False and cup["examples"] and "kind" in cup["required"]
+    assert "Pa" in cup["properties"]["vacuum"]["description"]
+    assert "m" in cup["properties"]["cup_radius"]["description"]
     for kind_ref in components["JobRequest"]["oneOf"]:  # each job kind's body (services/jobkinds)
         job_params = components[kind_ref["$ref"].rsplit("/", 1)[1]]["properties"]["params"]
         assert {"$ref": "#/components/schemas/JobParams"} in job_params["anyOf"]
@@ -194,12 +200,57 @@ def test_the_gripper_schema_accepts_what_the_library_accepts(change):
     from graspgen.errors import InvalidGripperError
     from graspgen.examples import EXAMPLE_GRIPPER
     from graspgen.gripper import GripperSpec
+    from services.api.contract_schemas import AnyGripperSpec
     from services.api.contract_schemas import GripperSpec as GripperSpecDoc
 
     spec = {**EXAMPLE_GRIPPER, **change}
     library = _accepts(GripperSpec.from_dict, spec, InvalidGripperError)
     documented = _accepts(lambda s: GripperSpecDoc.model_validate(s, strict=True), spec, ValidationError)
-    assert documented == library, spec
+    either = _accepts(lambda s: AnyGripperSpec.model_validate(s, strict=True), spec, ValidationError)
+    assert documented == library == either, spec
+
+
+CUP_CASES = [
+    {},
+    {"cup_radius": 0.0},
+    {"cup_radius": 15.0},
+    {"cup_height": -0.01},
+    {"max_strain": 0.99},
+    {"max_strain": 1.0},
+    {"vacuum": 101325},
+    {"vacuum": 101326},
+    {"friction": 10.0},
+    {"friction": 10.5},
+    {"pregrasp_clearance": 0.0},
+    {"pregrasp_clearance": -0.001},
+    {"tool": None},
+    {"tool": {"radius": 0.012}},
+    {"tool": {"radius": 0.012, "length": 0.0}},
+    {"tool": {"radius": 0.012, "length": 0.1, "colour": "red"}},
+    {"kind": None},
+    {"kind": "magnetic"},
+    {"name": "Bad Name"},
+    {"stroke": 0.08},
+    {"colour": "red"},
+]
+
+
+@pytest.mark.parametrize("change", CUP_CASES)
+def test_the_suction_schema_accepts_what_the_library_accepts(change):
+    """The typed cup schema, and the union of both kinds, accept and refuse what graspgen.kinds does (a cup without
+    its tool: `None` in a change removes the field)."""
+    from pydantic import ValidationError
+
+    from graspgen.errors import InvalidGripperError
+    from graspgen.kinds import gripper_from_dict
+    from services.api.contract_schemas import AnyGripperSpec, SuctionGripperSpec
+    from services.api.schemas import SUCTION_SPEC_EXAMPLE
+
+    spec = {k: v for k, v in {**SUCTION_SPEC_EXAMPLE, **change}.items() if v is not None}
+    library = _accepts(gripper_from_dict, spec, InvalidGripperError)
+    documented = _accepts(lambda s: SuctionGripperSpec.model_validate(s, strict=True), spec, ValidationError)
+    either = _accepts(lambda s: AnyGripperSpec.model_validate(s, strict=True), spec, ValidationError)
+    assert documented == library == either, spec
 
 
 PARAM_CASES = [

@@ -11,6 +11,7 @@ import trimesh
 from PIL import Image
 
 import graspgen
+import graspgen.kinds
 from graspgen import render
 from graspgen.cli import DEMO_GRIPPER, main
 from graspgen.errors import InvalidParameterError
@@ -111,3 +112,71 @@ def test_cli_render_and_preview(tmp_path, capsys):
     assert main([*args, "--out", str(tmp_path / "bad.png"), "--size", "300"]) == 2
     assert "size" in capsys.readouterr().err
     assert not (tmp_path / "bad.png").exists()
+
+
+def _cup_export(spec: dict, poses: list[np.ndarray]) -> dict:
+    """A suction export (CONTRACT.md "Suction cups") with a grasp at each pose, all in translation cluster 1."""
+    grasps = [
+        {
+            "pose": T.tolist(),
+            "contacts": [T[:3, 3].tolist()],
+            "normals": [(-T[:3, 2]).tolist()],
+            "approach": T[:3, 2].tolist(),
+            "free_rolls_deg": [0.0],
+            "cluster": [1, 0],
+            "cluster_size": 1,
+        }
+        for T in poses
+    ]
+    return {"format": "graspgen.grasp_set/1", "units": "m", "object": {"name": "plate"}, "gripper": spec,
+            "params": {}, "stats": {}, "grasps": grasps}  # fmt: skip
+
+
+def _from_above(x: float, y: float, z: float) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = np.diag([1.0, -1.0, -1.0])  # +Z down into the plate's top face
+    T[:3, 3] = (x, y, z)
+    return T
+
+
+def _coloured(img: np.ndarray) -> np.ndarray:
+    return (img.max(axis=2) - img.min(axis=2)) > 40
+
+
+def _runs(mask: np.ndarray) -> list[int]:
+    """The widths of the coloured pixels in each row that has some."""
+    return [int(np.ptp(np.flatnonzero(r))) + 1 for r in mask if r.any()]
+
+
+@pytest.mark.parametrize("tool", ["cylinder", "body"])
+def test_a_suction_cup_is_drawn_as_cup_and_tool(tool):
+    """A 30 mm cup from above the centre of a 100 mm plate: in the front view the coloured pixels stand on the plate,
+    as wide as the cup next to it and as wide as the tool (12 mm: a cylinder; 60 mm: a body) above the cup."""
+    from graspgen.example_grippers import box, stl_bytes
+
+    from ..grippers import CUP
+
+    mesh = trimesh.creation.box(extents=(0.1, 0.1, 0.01))
+    spec = dict(CUP, cup_height=0.03, tool={"radius": 0.006, "length": 0.09})
+    gripper = None
+    if tool == "body":
+        spec = {k: v for k, v in spec.items() if k != "tool"}
+        spec["geometry"] = {"units": "mm", "body": "body.stl"}
+        gripper = graspgen.kinds.gripper_from_dict(
+            spec, files={"body.stl": stl_bytes(box((-30, -30, -120), (30, 30, -30)))}
+        )
+    export = _cup_export(spec, [_from_above(0.0, 0.0, 0.005)])
+    img = _decode(render.render_grasp_set(mesh, export, size=(800, 800), gripper=gripper))
+    front = img[:400, 400:]  # the top-right tile: the front view (-Y), object +Z up
+    mask = _coloured(front)
+    rows = np.flatnonzero(mask.any(axis=1))
+    assert len(rows) > 50, "the cup and tool are drawn"
+    widths = _runs(mask)
+    # the cup (30 mm) sits below the tool: its rows are the lowest ones; the tool's the highest
+    cup, top = np.median(widths[-10:]), np.median(widths[:10])
+    expected = 12 / 30 if tool == "cylinder" else 60 / 30
+    assert top / cup == pytest.approx(expected, rel=0.15)
+    # the whole stack is 120 mm tall and the cup 30 mm wide: heights follow the same scale
+    assert (rows.max() - rows.min() + 1) / cup == pytest.approx(120 / 30, rel=0.1)
+    colour = cluster_colours(np.array([1]))[0].astype(float)
+    assert np.argmax(front[mask].mean(axis=0)) == np.argmax(colour)

@@ -189,3 +189,41 @@ def test_a_gripper_with_mesh_files_through_the_client(embedded_stack, tmp_path):
         assert far["grasps"]
         cut = gg.pick(np.eye(4), grasp_set=job["grasp_set"], planes=[{"point": [0, 0, 0], "normal": [0, 0, 1]}])
         assert len(cut["grasps"]) < len(far["grasps"]) or cut["feasible"] < far["feasible"]
+
+
+def test_a_suction_cup_through_the_client(embedded_stack, tmp_path):
+    """A cup from the shipped example (a file), as a SuctionSpec and with a body mesh (files=); a job on the embedded
+    worker; the candidates come back as a suction set, and the server's pick equals graspgen.pick on them."""
+    from pathlib import Path
+
+    from services_conftest import box_stl
+
+    from graspgen.example_grippers import box, stl_bytes
+    from graspgen.kinds import load_gripper
+    from graspgen.suction import SuctionCandidates
+
+    examples = Path(__file__).resolve().parents[2] / "examples"
+    url, token = embedded_stack
+    with Client(url, token, timeout=300) as gg:
+        first = gg.upload_gripper(examples / "cup-30.json")
+        assert first["spec"]["kind"] == "suction" and first["files"] == []
+        spec = load_gripper(examples / "cup-30.json")
+        assert gg.create_gripper(spec)["version"] == first["version"]  # the same spec as a SuctionSpec
+        body = {k: v for k, v in spec.to_dict().items() if k != "tool"} | {"name": slug("cupb")}
+        body["geometry"] = {"units": "mm", "body": "tool.stl"}
+        made = gg.create_gripper(body, files={"tool.stl": stl_bytes(box((-20, -20, -150), (20, 20, -20)))})
+        assert [f["path"] for f in made["files"]] == ["tool.stl"]
+        with pytest.raises(ProblemError) as e:
+            gg.create_gripper({**spec.to_dict(), "name": slug("cupx"), "vacuum": 2e5})
+        assert e.value.status == 422 and e.value.problem["field"] == "vacuum"
+        obj = slug("box")
+        gg.upload_object(box_stl((80.0, 60.0, 30.0)), name=obj, units="mm", filename="box.stl")
+        job = gg.wait(gg.submit_job(obj, "cup-30", params={**SMALL, "mass_kg": 0.2}), timeout=300)
+        gs = job["grasp_set"]
+        assert gg.grasp_set(gs)["gripper"] == first["spec"]
+        cands = gg.candidates(gs)
+        assert isinstance(cands, SuctionCandidates) and cands.contacts.shape[1] == 1
+        floor = [{"point": [0, 0, -0.015], "normal": [0, 0, 1]}]
+        answer = gg.pick(np.eye(4), object=obj, gripper="cup-30", approach=DOWN, planes=floor, limit=10)
+        local = graspgen.pick(cands, np.eye(4), approach=DOWN, planes=floor, limit=10, gripper=spec)
+        assert answer["grasps"] and [g["candidate"] for g in answer["grasps"]] == [g["candidate"] for g in local.grasps]

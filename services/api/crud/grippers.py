@@ -1,9 +1,11 @@
-"""Grippers and their versions: validated by GripperSpec; an identical spec is not a new version.
+"""Grippers and their versions: validated by graspgen's spec of their kind (graspgen.kinds: a parallel gripper's
+GripperSpec, a suction cup's SuctionSpec); an identical spec is not a new version.
 
-A spec with `geometry` comes with its mesh files (multipart, one part per file name the geometry gives). The spec is
-checked with its files before anything is stored; its stored form (GripperSpec.to_dict) carries each file's sha256,
-so identical specs with identical files give the same digest (the existing version) and a changed file a new one.
-The files go to storage content-addressed, like object files, and into gripper_files with the version.
+A spec with `geometry` (CAD fingers and body, or a suction tool's body) comes with its mesh files (multipart, one
+part per file name the geometry gives). The spec is checked with its files before anything is stored; its stored
+form (the spec's to_dict) carries each file's sha256, so identical specs with identical files give the same digest
+(the existing version) and a changed file a new one. The files go to storage content-addressed, like object files,
+and into gripper_files with the version.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from graspgen.gripper import GripperSpec
+from graspgen.kinds import gripper_from_dict
 from services.common.grippers import file_digests
 from services.common.jobs import sha256_json
 from services.common.models import Gripper, GripperFile, GripperVersion
@@ -64,7 +66,7 @@ def create_gripper(
 ) -> tuple[dict[str, Any], bool]:
     """Register a spec (and, with geometry, its `files` by name); returns (version view, created)."""
     # InvalidGripperError -> 422: the spec, every file (missing, extra, unreadable, not a closed solid, frames)
-    spec = GripperSpec.from_dict(data, files=files, max_decoded_bytes=max_decoded_bytes).to_dict()
+    spec = gripper_from_dict(data, files=files, max_decoded_bytes=max_decoded_bytes).to_dict()
     digest = sha256_json(spec)
     name = spec["name"]
     existing = _find(session, name, digest)

@@ -17,6 +17,7 @@ from sqlalchemy.orm import Session
 
 from graspgen.export import load_candidates
 from graspgen.pick import DEFAULT_LIMIT, DEFAULT_PREGRASP_DISTANCE, PickIndex, PickQuery
+from graspgen.suction import SuctionSpec, load_suction_candidates
 from services.common.grippers import stored_gripper_spec
 from services.common.models import GraspSet, GripperVersion
 
@@ -73,11 +74,13 @@ def _index(state: Any, ref: PickRef) -> PickIndex:
     except FileNotFoundError:
         raise ApiError(503, "artifact-missing", "the candidate NPZ is missing from storage") from None
     try:
-        # a spec with geometry is loaded with its meshes; a box spec keeps only the fields this graspgen knows
+        # a spec with geometry is loaded with its meshes; one without keeps only the fields this graspgen knows
         gripper = stored_gripper_spec(state.storage, ref.gripper_spec)
     except FileNotFoundError:
         raise ApiError(503, "artifact-missing", "a mesh file of the gripper is missing from storage") from None
-    index = PickIndex.build(load_candidates(io.BytesIO(data)), gripper)
+    # the candidate NPZ of the gripper's kind: a parallel set's pairs, a suction set's cups (one contact each)
+    load = load_suction_candidates if isinstance(gripper, SuctionSpec) else load_candidates
+    index = PickIndex.build(load(io.BytesIO(data)), gripper)
     cache.put(ref.id, index, index.nbytes)
     return index
 

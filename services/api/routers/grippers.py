@@ -13,7 +13,15 @@ from ..crud import grippers as crud
 from ..deps import PagingDep, ReadDep, ReadSessionDep, SessionDep, SettingsDep, StorageDep, WriteDep
 from ..http import IMMUTABLE, blob_response
 from ..problems import ApiError
-from ..schemas import GRIPPER_SPEC_EXAMPLE, ID_MAX, SLUG, GripperOut, GripperPage, GripperVersionOut
+from ..schemas import (
+    GRIPPER_SPEC_EXAMPLE,
+    ID_MAX,
+    SLUG,
+    SUCTION_SPEC_EXAMPLE,
+    GripperOut,
+    GripperPage,
+    GripperVersionOut,
+)
 from . import problems
 
 router = APIRouter(prefix="/v1/grippers", tags=["grippers"])
@@ -31,8 +39,11 @@ _SPEC_BODY = {
     "required": True,
     "content": {
         "application/json": {
-            "schema": {"allOf": [{"$ref": "#/components/schemas/GripperSpec"}]},
-            "example": GRIPPER_SPEC_EXAMPLE,
+            "schema": {"allOf": [{"$ref": "#/components/schemas/AnyGripperSpec"}]},
+            "examples": {
+                "parallel": {"summary": "a parallel-jaw gripper (boxes)", "value": GRIPPER_SPEC_EXAMPLE},
+                "suction": {"summary": "a suction cup on a cylinder tool", "value": SUCTION_SPEC_EXAMPLE},
+            },
         },
         "multipart/form-data": {
             "schema": {
@@ -41,13 +52,15 @@ _SPEC_BODY = {
                 "properties": {
                     "spec": {
                         "type": "string",
-                        "description": "the gripper spec JSON (CONTRACT.md), with `geometry` naming its mesh files",
+                        "description": "the gripper spec JSON (CONTRACT.md, either kind), with `geometry` naming its "
+                        "mesh files",
                     }
                 },
                 "additionalProperties": {
                     "type": "string",
                     "format": "binary",
-                    "description": "one file part per path the spec's geometry names (finger, finger_left, body), "
+                    "description": "one file part per path the spec's geometry names (finger, finger_left, body; "
+                    "a suction cup's: body), "
                     "the part's field name being that path, e.g. `finger.stl`; STL, OBJ, PLY, OFF or GLB, each at "
                     "most the upload limit and 200,000 triangles",
                 },
@@ -111,12 +124,13 @@ async def _read_limited(upload: UploadFile, key: str, limit: int) -> bytes:
     "",
     status_code=201,
     response_model=GripperVersionOut,
-    summary="Register a gripper spec (CONTRACT.md, metres), with its mesh files when it has geometry",
-    description="A box spec is sent as JSON. A spec with `geometry` (finger and body meshes from CAD) is sent as "
-    "multipart/form-data: field `spec` holds the JSON and each file the geometry names is a file part whose field "
-    "name is that path. The spec and every file are checked before anything is stored (422 naming the field). An "
-    "identical spec (with identical files) returns the existing version (200); anything else under the same name "
-    "becomes the next version (201), so a changed file is a new version.",
+    summary="Register a gripper spec of either kind (CONTRACT.md, metres), with its mesh files when it has geometry",
+    description="A parallel gripper of boxes or a suction cup on a cylinder tool is sent as JSON. A spec with "
+    "`geometry` (finger and body meshes from CAD, or a suction tool's body mesh) is sent as multipart/form-data: "
+    "field `spec` holds the JSON and each file the geometry names is a file part whose field name is that path. The "
+    "spec and every file are checked before anything is stored (422 naming the field). An identical spec (with "
+    "identical files) returns the existing version (200); anything else under the same name becomes the next "
+    "version (201), so a changed file is a new version.",
     responses={
         200: {"description": "Existing version (identical spec and files)", "model": GripperVersionOut},
         **problems(400, 413, 422),
