@@ -5,15 +5,18 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, TypeAlias
+from typing import TYPE_CHECKING, Any, TypeAlias
 
-from .errors import InvalidGripperError
+from .errors import InvalidGripperError, InvalidParameterError
 from .gripper import KIND as PARALLEL
 from .gripper import GripperSpec
 from .suction import KIND as SUCTION
-from .suction import SuctionSpec, read_spec_json
+from .suction import SuctionSpec, check_params, read_spec_json
 
-__all__ = ["GripperKind", "KINDS", "load_gripper", "gripper_from_dict"]
+if TYPE_CHECKING:
+    from .params import Params, QualityOptions
+
+__all__ = ["GripperKind", "KINDS", "load_gripper", "gripper_from_dict", "check_params_for_kind"]
 
 #: a gripper spec of any kind
 GripperKind: TypeAlias = GripperSpec | SuctionSpec
@@ -57,3 +60,15 @@ def load_gripper(
             data, files=files, base_dir=path.parent if base_dir is None and files is None else base_dir
         )
     return gripper_from_dict(data_or_path, files=files, base_dir=base_dir)
+
+
+def check_params_for_kind(kind: str, params: Params, options: QualityOptions) -> None:
+    """InvalidParameterError naming the field when a run parameter or option has no meaning for the gripper `kind`
+    (refused, not ignored): generate() calls it when a run starts, the service when a job is submitted."""
+    if kind == SUCTION:
+        check_params(params, options)
+    elif params.max_tilt_deg is not None:
+        raise InvalidParameterError(
+            "max_tilt_deg is for suction cups: a parallel gripper's approach follows from its contacts",
+            field="max_tilt_deg",
+        )

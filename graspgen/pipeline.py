@@ -19,8 +19,9 @@ from . import hold as _hold
 from .coverage import coverage
 from .errors import InvalidMeshError, InvalidParameterError, InvalidUnitsError
 from .export import Candidates, GraspSet
+from .gripper import KIND as PARALLEL
 from .gripper import GripperSpec
-from .kinds import gripper_from_dict
+from .kinds import check_params_for_kind, gripper_from_dict
 from .params import Params, QualityOptions, from_keywords, keyword_parameters
 from .parts import Part, load_part
 from .seating import SEAT_TRIES, Seated, SeatHold, SeatJudge, nearest_members
@@ -160,11 +161,7 @@ def generate(
             object_name=object_name,
             object_version=object_version,
         )
-    if params.max_tilt_deg is not None:
-        raise InvalidParameterError(
-            "max_tilt_deg is for suction cups: a parallel gripper's approach follows from its contacts",
-            field="max_tilt_deg",
-        )
+    check_params_for_kind(PARALLEL, params, options)
     _check_geometry_params(spec, params)
     mu = spec.friction if params.friction is None else params.friction
     run = _Run(spec, params, options, mu, report, timings={}, started=time.perf_counter())

@@ -7,12 +7,13 @@ evaluates every criterion on given contacts and approaches; `cup_meshes` gives t
 """
 
 from ._export import SuctionCandidates, SuctionGraspSet, load_suction_candidates
-from ._generate import CRITERIA, CupJudgement, generate_suction, judge_cups, suction_candidates
+from ._generate import CRITERIA, CupJudgement, check_params, generate_suction, judge_cups, suction_candidates
 from ._model import SUCTION, SuctionModel
 from ._recording import cup_meshes
 from ._spec import KIND, MAX_VACUUM, SuctionSpec, ToolCylinder, read_spec_json
 
 __all__ = [
+    "check_params",
     "SuctionSpec",
     "ToolCylinder",
     "KIND",

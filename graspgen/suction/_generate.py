@@ -34,7 +34,7 @@ from ._model import SUCTION, SuctionModel, depth_limits, inner_probes, lip_point
 from ._seal import PASS, REASONS, SealPart, SealRule, seal_kernel
 from ._spec import MAX_VACUUM, SuctionSpec
 
-__all__ = ["generate_suction", "suction_candidates", "judge_cups", "CupJudgement", "CRITERIA"]
+__all__ = ["generate_suction", "suction_candidates", "judge_cups", "check_params", "CupJudgement", "CRITERIA"]
 
 #: the criteria in the order they run (and the keys of stats.rejected)
 CRITERIA = ("seal", "tilt", "hold", "collision")
@@ -169,7 +169,7 @@ def generate_suction(
     """Suction grasps for one part (module docstring); the arguments as graspgen.generate takes them."""
     report = progress or _noop
     started = time.perf_counter()
-    _check_params(params, options)
+    check_params(params, options)
     run = _Run(spec, params, spec.friction if params.friction is None else params.friction, report, {})
     loaded = _load(run, mesh_or_path, units, object_name)
     surface = _sample(run, loaded.part)
@@ -399,7 +399,7 @@ def _stats(
     return stats
 
 
-def _check_params(params: Params, options: QualityOptions) -> None:
+def check_params(params: Params, options: QualityOptions) -> None:
     """The run parameters and options that have no meaning for a suction cup are refused, not ignored."""
     if params.inside:
         raise InvalidParameterError("inside grasps are for jaws: a suction cup seals on an outer face", field="inside")

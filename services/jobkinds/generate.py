@@ -8,13 +8,14 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal
 from pydantic import ConfigDict, Field
 from sqlalchemy.orm import Session
 
+from graspgen.kinds import check_params_for_kind
 from graspgen.params import Params, QualityOptions, from_job
 from services.api.schemas import ID_MAX, PARAMS_DOC, PARAMS_EXAMPLE, SLUG, BulkItem, NoNulModel
 from services.common.grippers import gripper_kind
 from services.common.versions import GRIPPERS, OBJECTS, Versioned, find_version
 
 from .kind import JobKind, RunContext
-from .params import JOB_PARAM_NAMES, check_for_kind, split_quality
+from .params import JOB_PARAM_NAMES, split_quality
 
 if TYPE_CHECKING:
     from graspgen.export import GraspSet
@@ -80,7 +81,8 @@ def _effective_params(
         core["mass_kg"] = mass_kg
     p = Params.from_dict(core)  # InvalidParameterError -> 422
     effective = {**p.to_dict(friction=p.friction if p.friction is not None else float(spec["friction"])), **quality}
-    check_for_kind(gripper_kind(spec), effective)  # params the gripper's kind cannot use: 422 now, not a failed job
+    # params the gripper's kind cannot use: 422 now, not a failed job
+    check_params_for_kind(gripper_kind(spec), p, QualityOptions.split_job(quality)[1])
     return effective
 
 

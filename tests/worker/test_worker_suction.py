@@ -154,7 +154,8 @@ def test_params_a_kind_cannot_use_are_refused_at_submission(pg_service, which, p
 
 @pytest.mark.parametrize("which, params, field", NOT_FOR_KIND)
 def test_graspgen_refuses_the_same_params(which, params, field):
-    """The service's list (services/jobkinds/params.py NOT_FOR_KIND) refuses only what graspgen refuses too."""
+    """graspgen.generate refuses them when the run starts, with the check the service runs at submission
+    (graspgen.kinds.check_params_for_kind)."""
     import trimesh
 
     from graspgen.errors import InvalidParameterError
