@@ -16,6 +16,9 @@ from pathlib import Path
 
 import pytest
 
+# a hook: keeps --dist loadgroup's groups on one worker under pytest >= 9.2 (tests/xdist_groups.py says why)
+from tests.xdist_groups import pytest_collection_modifyitems  # noqa: F401
+
 if "services_conftest" not in sys.modules:
     _spec = importlib.util.spec_from_file_location("services_conftest", Path(__file__).parent / "services_conftest.py")
     _module = importlib.util.module_from_spec(_spec)
