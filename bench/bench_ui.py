@@ -8,8 +8,12 @@ uploaded through the API, candidates on its +-X faces written with graspgen's ow
 them exported as grasps with the contract's grasp frames, stored as the worker stores a set (storage blobs, a
 grasp-set row, the catalogue refreshed). Each run opens a new tab, enters the token and reads the page's own
 performance measures (set page start -> ...): `export` (the export JSON parsed), `drawn` (part and grippers on
-screen), `candidates` (the candidate cloud fetched, inflated, coloured and on screen). Prints a table; the figures
-go to docs/benchmarks.md ("Review page").
+screen), `candidates` (the candidate cloud, a view of at most 50,000 rows, fetched, coloured and on screen; the page
+draws it in the first frame when it is in by then), `complete` (`.viewer[data-state=complete]`: everything above and
+the side pane's header, history and job, seen by a mutation observer). `click` is from just before Playwright clicks
+"Use token" to complete, on the page's clock (Playwright's own wait polls every 100-500 ms, too coarse for this).
+Prints a table and the machine's load average (the figures move with it); they go to docs/benchmarks.md ("Review
+page").
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import os
 import secrets
 import statistics
 import subprocess
@@ -46,6 +51,7 @@ GRIPPER = {
     "grip_force": 20.0,
 }
 EXTENTS_MM = (60.0, 40.0, 30.0)
+CLOUD_LIMIT = 50_000  # ui/src/shared.js CLOUD_LIMIT: the most candidates the page draws
 
 
 def synthetic_set(n: int, m: int, rolls: int = 16, seed: int = 0) -> tuple[dict[str, np.ndarray], list[dict]]:
@@ -176,12 +182,20 @@ def seed(url: str, token: str, settings, n: int, m: int) -> tuple[int, int]:  # 
         db.dispose()
 
 
-def server_times(url: str, token: str, set_id: int, n: int = 10) -> dict[str, float]:
-    """Median ms of the page's main requests from a plain HTTP client: what the server and loopback take."""
+def server_times(url: str, token: str, set_id: int, n: int = 10) -> tuple[dict[str, float], float, int]:
+    """Median ms of the page's requests from a plain HTTP client (what the server and loopback take), the first
+    request of the candidate view (ms: the view made, not yet cached) and the view's size in bytes."""
     paths = {
         "export": f"/v1/grasp-sets/{set_id}",
         "object file": "/v1/objects/bench-box/versions/1/file",
         "candidate NPZ": f"/v1/grasp-sets/{set_id}/candidates",
+        # the page's request (ui/src/shared.js, loadCandidates); made once, then from the API's cache
+        "candidate view": f"/v1/grasp-sets/{set_id}/candidates?arrays=midpoints,friction_margin_deg,hold_margin"
+        f"&max_rows={CLOUD_LIMIT}",
+        "set summary": "/v1/grasp-sets?object=bench-box&gripper=pgn-80&limit=200",
+        "catalogue": "/v1/catalogue/bench-box/pgn-80",
+        "history": "/v1/catalogue/bench-box/pgn-80/history?limit=5",
+        "job (404)": f"/v1/jobs/{uuid.uuid4()}",
     }
     out = {}
     with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {token}"}, timeout=60) as c:
@@ -189,10 +203,25 @@ def server_times(url: str, token: str, set_id: int, n: int = 10) -> dict[str, fl
             times = []
             for _ in range(n):
                 t = time.perf_counter()
-                assert c.get(path).status_code == 200
+                r = c.get(path)
                 times.append((time.perf_counter() - t) * 1000)
+                assert r.status_code == (404 if "404" in label else 200)
+                if label == "candidate view" and len(times) == 1:
+                    view_first, view_size = times[0], len(r.content)
             out[label] = statistics.median(times)
-    return out
+    return out, view_first, view_size
+
+
+#: run in the page before the click: the click's time, and when the viewer's data-state turns `complete` (a mutation
+#: observer's callback runs right after the change), both on the page's clock
+WATCH = """() => {
+  window.__bench = {click: performance.now()};
+  new MutationObserver(() => {
+    if (!window.__bench.complete && document.querySelector('.viewer[data-state=complete]')) {
+      window.__bench.complete = performance.now();
+    }
+  }).observe(document.body, {subtree: true, childList: true, attributes: true, attributeFilter: ['data-state']});
+}"""
 
 
 def run_page(browser, url: str, token: str, set_id: int) -> dict[str, float]:  # type: ignore[no-untyped-def]
@@ -207,10 +236,10 @@ def run_page(browser, url: str, token: str, set_id: int) -> dict[str, float]:  #
     )
     page.goto(f"{url}/ui/#/set/{set_id}")
     page.get_by_label("Access token").fill(token)
-    t0 = time.perf_counter()
+    page.evaluate(WATCH)
     page.get_by_role("button", name="Use token").click()
     page.locator(".viewer[data-state=complete]").wait_for(timeout=120_000)
-    wall = time.perf_counter() - t0
+    watched = page.evaluate("window.__bench")
     measures = page.evaluate(
         "Object.fromEntries(performance.getEntriesByType('measure').map(m => [m.name, m.duration]))"
     )
@@ -226,7 +255,8 @@ def run_page(browser, url: str, token: str, set_id: int) -> dict[str, float]:  #
         "export": export,
         "drawn": measures["gg:set:drawn"],
         "candidates": measures["gg:set:candidates"],
-        "click_to_complete": wall * 1000,
+        "complete": watched["complete"] - start,
+        "click": watched["complete"] - watched["click"],
         "n": drawn,
     }
 
@@ -241,6 +271,7 @@ def main() -> None:
     reason = missing()
     if reason:
         sys.exit(f"bench_ui: {reason}")
+    load = os.getloadavg()
     from playwright.sync_api import sync_playwright
 
     from services.common.migrate import upgrade
@@ -265,7 +296,7 @@ def main() -> None:
         try:
             wait_http(url + "/healthz", timeout=120)
             set_id, npz_size = seed(url, token, settings, args.candidates, args.grasps)
-            served = server_times(url, token, set_id)
+            served, view_first, view_size = server_times(url, token, set_id)
             rows = []
             with sync_playwright() as p:
                 browser = launch(p)
@@ -277,14 +308,17 @@ def main() -> None:
         finally:
             stop_process(proc)
     print(f"review page: set of {args.grasps} grasps, {args.candidates:,} candidates (NPZ {npz_size / 1e6:.1f} MB), ")
-    print(f"{rows[0]['n']:,} of them drawn; Chromium headless, SwiftShader; {args.runs} runs after one warm-up\n")
+    print(f"{rows[0]['n']:,} of them drawn (the page's view of them: {view_size / 1e6:.1f} MB); Chromium headless, ")
+    after = os.getloadavg()[0]
+    print(f"SwiftShader; {args.runs} runs after one warm-up; load average {load[0]:.1f} before, {after:.1f} after\n")
     print(f"| {'from the set page start to':<42} | median ms | min ms | max ms |")
     print(f"|{'-' * 44}|-----------|--------|--------|")
     labels = {
         "export": "export JSON parsed",
-        "drawn": "part and 64 grippers on screen",
-        "candidates": "candidate cloud on screen (page complete)",
-        "click_to_complete": "'Use token' click -> complete (Playwright)",
+        "drawn": f"part and {args.grasps} grippers on screen",
+        "candidates": "candidate cloud on screen",
+        "complete": "page complete (data-state=complete)",
+        "click": "'Use token' click -> complete",
     }
     for key, label in labels.items():
         v = [r[key] for r in rows]
@@ -292,6 +326,7 @@ def main() -> None:
     print(
         "\nthe same requests from httpx (server and loopback alone), median of 10: "
         + ", ".join(f"{k} {v:.0f} ms" for k, v in served.items())
+        + f"; the view's first request (made, then cached) {view_first:.0f} ms"
     )
 
 

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import tempfile
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -12,11 +14,11 @@ from typing import IO, Any
 
 import numpy as np
 
-from .errors import InvalidCandidatesError
+from .errors import InvalidCandidatesError, InvalidParameterError
 from .gripper import GripperSpec
 from .params import Params
 
-__all__ = ["FORMAT", "Candidates", "GraspSet", "load_candidates", "write_atomic"]
+__all__ = ["FORMAT", "WHOLE_ARRAYS", "Candidates", "GraspSet", "candidate_view", "load_candidates", "write_atomic"]
 
 FORMAT = "graspgen.grasp_set/1"
 
@@ -115,6 +117,54 @@ def load_candidates(path: str | os.PathLike[str] | IO[bytes]) -> Candidates:
     )
 
 
+#: arrays of the candidate NPZ that are not over its candidates: candidate_view keeps them whole
+WHOLE_ARRAYS = frozenset({"roll_angles_rad", "medoids", "center_of_mass"})
+
+
+def candidate_view(
+    npz: bytes, *, arrays: Sequence[str] | None = None, max_rows: int | None = None
+) -> dict[str, np.ndarray]:
+    """Some arrays of the candidate NPZ `npz` (its bytes), over at most `max_rows` of its `n` candidates.
+
+    `arrays`: the names to return, in this order (None: every array of the NPZ); names the NPZ lacks are left out.
+    `max_rows` (>= 1; None: every row): rows 0, s, 2s, ... are kept, s = ceil(n / max_rows), so k = ceil(n / s) <=
+    `max_rows` rows (all of them when n <= max_rows). Every array over the candidates (leading axis of length n) is cut
+    to those rows; `roll_angles_rad`, `medoids` (rows of the full NPZ) and `center_of_mass` are kept whole. With
+    `max_rows` the result adds `rows (k,) int64`, the kept rows' indices in the full NPZ, and `row_count () int64`, n.
+    Only the members returned are inflated (and `contacts`' header is read for n).
+    """
+    if max_rows is not None and max_rows < 1:
+        raise InvalidParameterError(f"max_rows must be at least 1, got {max_rows}")
+    try:
+        with np.load(io.BytesIO(npz), allow_pickle=False) as z:
+            names = list(dict.fromkeys(a for a in (z.files if arrays is None else arrays) if a in z.files))
+            if max_rows is None:
+                return {a: z[a] for a in names}
+            n = _leading_length(z, "contacts")
+            step = max(1, -(-n // max_rows))
+            out: dict[str, np.ndarray] = {}
+            for a in names:
+                v = z[a]
+                cut = a not in WHOLE_ARRAYS and v.ndim >= 1 and v.shape[0] == n
+                out[a] = np.ascontiguousarray(v[::step]) if cut and step > 1 else v
+    except (OSError, ValueError, KeyError) as exc:
+        raise InvalidCandidatesError(f"cannot read the candidate NPZ: {exc}") from None
+    out["rows"] = np.arange(0, n, step, dtype=np.int64)
+    out["row_count"] = np.array(n, dtype=np.int64)
+    return out
+
+
+def _leading_length(z: Any, name: str) -> int:
+    """The first dimension of member `name` of an open NpzFile, from its .npy header alone."""
+    with z.zip.open(f"{name}.npy") as f:
+        version = np.lib.format.read_magic(f)
+        read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        shape = read(f)[0]
+    if not shape:
+        raise InvalidCandidatesError(f"{name} of the candidate NPZ is a scalar")
+    return int(shape[0])
+
+
 def _optional(data: dict[str, np.ndarray], key: str, shape: tuple[int, ...]) -> np.ndarray | None:
     if key not in data:
         return None
@@ -201,25 +251,27 @@ class GraspSet(ExportMethods):
 NPZ_DEFLATE_LEVEL = 1
 
 
-def npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
-    """An NPZ (read by `np.load`) of `arrays`, deflated by ISA-L at `NPZ_DEFLATE_LEVEL`, with fixed member
-    timestamps: the same arrays give the same bytes (numpy's savez stamps the current time)."""
-    import io
+def npz_bytes(arrays: dict[str, np.ndarray], *, deflate: bool = True) -> bytes:
+    """An NPZ (read by `np.load`) of `arrays`, deflated by ISA-L at `NPZ_DEFLATE_LEVEL` (stored as they are when
+    `deflate` is false: no inflating for the reader), with fixed member timestamps: the same arrays give the same
+    bytes (numpy's savez stamps the current time)."""
     import zipfile
 
     from isal import isal_zlib
 
+    method = zipfile.ZIP_DEFLATED if deflate else zipfile.ZIP_STORED
     buf = io.BytesIO()
-    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+    with zipfile.ZipFile(buf, "w", compression=method) as zf:
         for name, a in arrays.items():
             info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
-            info.compress_type = zipfile.ZIP_DEFLATED
+            info.compress_type = method
             info.external_attr = 0o644 << 16
             with zf.open(info, "w", force_zip64=True) as f:
-                # the member's raw deflate stream from ISA-L instead of zlib (zipfile has no hook for the
-                # compressor; _ZipWriteFile of Python 3.11 calls only compress() and flush() on it)
-                f._compressor = isal_zlib.compressobj(  # type: ignore[attr-defined]  # IO[bytes] is a _ZipWriteFile
-                    NPZ_DEFLATE_LEVEL, isal_zlib.DEFLATED, -15
-                )
+                if deflate:
+                    # the member's raw deflate stream from ISA-L instead of zlib (zipfile has no hook for the
+                    # compressor; _ZipWriteFile of Python 3.11 calls only compress() and flush() on it)
+                    f._compressor = isal_zlib.compressobj(  # type: ignore[attr-defined]  # IO[bytes] is a _ZipWriteFile
+                        NPZ_DEFLATE_LEVEL, isal_zlib.DEFLATED, -15
+                    )
                 np.lib.format.write_array(f, np.asanyarray(a), allow_pickle=False)
     return buf.getvalue()

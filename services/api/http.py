@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Hashable
+
 from fastapi import Request, Response
 from fastapi.responses import StreamingResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
@@ -68,7 +70,8 @@ def blob_response(
 
 
 class BlobCache:
-    """Bytes of immutable blobs (grasp-set exports) kept in memory, least recently used evicted first.
+    """Bytes of immutable blobs (grasp-set exports) and of what is made from them (views of candidate NPZs) kept in
+    memory, least recently used evicted first.
 
     Content-addressed keys never change meaning, so nothing is ever invalidated; with S3 storage this saves a round
     trip to the bucket on every catalogue lookup.
@@ -86,6 +89,14 @@ class BlobCache:
         EXPORT_CACHE.labels("miss" if data is None else "hit").inc()
         if data is None:
             data = self.storage.get_bytes(key)
+            self._lru.put(key, data, len(data))
+        return data
+
+    def derived(self, key: Hashable, make: Callable[[], bytes]) -> bytes:
+        """Bytes made from immutable blobs (a view of a candidate NPZ), made once and kept in the same budget."""
+        data = self._lru.get(key)
+        if data is None:
+            data = make()
             self._lru.put(key, data, len(data))
         return data
 

@@ -56,7 +56,8 @@ class Settings(BaseSettings):
     worker_memory_bytes: int | None = Field(default=None, ge=64 * 1024 * 1024)
     page_size_default: int = Field(default=50, ge=1, le=1000)
     page_size_max: int = Field(default=500, ge=1, le=10_000)
-    #: grasp-set exports kept in the API's memory (they are immutable, so the cache is never invalidated)
+    #: grasp-set exports and views of candidate NPZs (GET .../candidates?max_rows=) kept in the API's memory (they are
+    #: immutable, so the cache is never invalidated)
     export_cache_bytes: int = Field(default=64 * 1024 * 1024, ge=0)
     #: prepared candidate pairs of grasp sets kept for the pick query (about 150 bytes per candidate roll)
     pick_cache_bytes: int = Field(default=512 * 1024 * 1024, ge=0)

@@ -90,6 +90,16 @@ def test_the_job_kinds_documented_are_the_registry(schema):
     assert not any(re.fullmatch(pattern, bad) for bad in ("nope", "", "generate|cluster", "Generate"))
 
 
+def test_the_candidate_view_parameters_are_documented(schema):
+    op = schema["paths"]["/v1/grasp-sets/{grasp_set_id}/candidates"]["get"]
+    params = {p["name"]: p for p in op["parameters"] if p["in"] == "query"}
+    assert set(params) == {"arrays", "max_rows"}
+    assert all(not p.get("required") and p.get("description") and p["schema"].get("examples") for p in params.values())
+    rows = params["max_rows"]["schema"]["anyOf"][0]
+    assert rows["type"] == "integer" and rows["minimum"] == 1
+    assert "row_count" in op["description"] and "rows" in op["description"]
+
+
 def test_operation_ids_are_readable_and_unique(schema):
     ids = [op["operationId"] for ops in schema["paths"].values() for op in ops.values()]
     assert len(ids) == len(set(ids))

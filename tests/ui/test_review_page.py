@@ -461,6 +461,40 @@ def test_hand_made_cad_and_suction_specs_are_drawn(served, browser_page):
         page.unroute_all()
 
 
+def test_a_late_candidate_cloud_does_not_hold_up_the_part_and_the_grippers(served, browser_page):
+    """The page asks for a decimated view of the candidates with the export; while that answer is held back, the part
+    and the grippers are drawn (the first frame waits a quarter of a second at most) and the page is not complete;
+    once it comes, the cloud is drawn and the page is complete."""
+    page = browser_page["page"]
+    set_id = served["sets"][1]
+    held = []
+    page.route(re.compile(r".*/v1/grasp-sets/\d+/candidates\?.*"), lambda route: held.append(route))
+    try:
+        page.evaluate("location.hash = '#/'")
+        page.locator("table.catalogue").wait_for()
+        page.evaluate(f"location.hash = '#/set/{set_id}'")
+        viewer = page.locator(".viewer[data-state=drawn]")
+        viewer.wait_for()
+        assert [urlsplit(r.request.url).query for r in held] == [
+            "arrays=midpoints%2Cfriction_margin_deg%2Chold_margin&max_rows=50000"
+        ]
+        assert drawn_share(page.locator(".viewer canvas").screenshot()) > 0.02
+        page.get_by_text("(loading…)").wait_for()
+        assert viewer.get_attribute("data-state") == "drawn"  # not complete without its cloud
+        shot(page, "12b-cloud-held-back")
+        held[0].continue_()
+        page.locator(".viewer[data-state=complete]").wait_for()
+    finally:
+        page.unroute_all()
+    export = httpx.get(
+        f"{served['url']}/v1/grasp-sets/{set_id}", headers={"Authorization": f"Bearer {served['tokens']['reader']}"}
+    ).json()
+    n = export["stats"]["candidates"]
+    assert page.locator(".viewer").get_attribute("data-candidates") == str(n)
+    assert page.locator(".viewer").get_attribute("data-drawn-candidates") == str(min(n, 50_000))
+    assert page.get_by_text(f"({n:,})" if n <= 50_000 else f"(50,000 of {n:,} drawn)").count() == 1
+
+
 def test_every_request_stayed_on_the_origin_and_the_console_is_clean(served, browser_page):
     origin = urlsplit(served["url"])
     requests = browser_page["requests"]

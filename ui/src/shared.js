@@ -3,7 +3,7 @@
 import * as THREE from 'three';
 import { STLLoader } from 'three/addons/loaders/STLLoader.js';
 import { explain, getBytes, getJson, getWithHeaders, postJson, q, seg } from './api.js';
-import { MEASURES, normalise, ramp, range } from './colour.js';
+import { MEASURES, linearRampColours, normalise, ramp, range } from './colour.js';
 import { badge, clear, h } from './dom.js';
 import { meshPaths } from './gripper.js';
 import { partGeometry } from './mesh.js';
@@ -67,19 +67,27 @@ export async function gripperMeshes(spec, gripperVersion) {
 /** The part of an export's object version: {record, geometry, points}. */
 export async function loadPart(exportJson) {
   const { name, version } = exportJson.object;
-  const record = await getJson(`/v1/objects/${seg(name)}/versions/${version}`);
-  const bytes = await getBytes(record.links.file);
+  const path = `/v1/objects/${seg(name)}/versions/${version}`;
+  // the record (format, units) and the file at once: the file's address is the API's own (GET .../file)
+  const [record, bytes] = await Promise.all([getJson(path), getBytes(`${path}/file`)]);
   const { geometry, points } = await partGeometry(bytes, record.format, record.units);
   return { record, geometry, points };
 }
 
-/** Everything drawing set `id` needs, loaded in parallel where it can be. */
-export async function loadSet(id, afterExport = null) {
+/**
+ * Everything drawing set `id` needs, loaded in parallel where it can be. `onExport(exportJson, summary)` runs once
+ * the export is in and the requests it leads to are on their way (`summary` a promise of the set's summary): the set
+ * page starts its other requests and creates its WebGL context there.
+ */
+export async function loadSet(id, { onExport = null } = {}) {
   const exportJson = await getJson(`/v1/grasp-sets/${id}`);
   performance.mark(`gg:set:${id}:export`);
-  afterExport?.();
   const summaryP = setSummary(id, exportJson.object.name, exportJson.gripper.name);
-  const [part, summary] = await Promise.all([loadPart(exportJson), summaryP]);
+  const partP = loadPart(exportJson);
+  partP.catch(() => {}); // awaited below
+  summaryP.catch(() => {});
+  onExport?.(exportJson, summaryP);
+  const [part, summary] = await Promise.all([partP, summaryP]);
   const meshes = summary ? await gripperMeshes(exportJson.gripper, summary.gripper_version) : null;
   return { id, exportJson, summary, part, meshes };
 }
@@ -92,33 +100,43 @@ export function graspColours(grasps, measure) {
   return { colours: values.map((v) => (v === null ? [0.6, 0.6, 0.6] : ramp(normalise(v, r)))), range: r };
 }
 
-/** The candidate NPZ's bytes (started early: the download overlaps drawing the part and the grippers). */
-export function downloadCandidates(id) {
-  const p = getBytes(`/v1/grasp-sets/${id}/candidates`);
-  p.catch(() => {}); // handled where it is awaited
-  return p;
-}
+/** Candidates drawn at most: above this the server sends an even stride through the rows (issue 34: "decimated when
+ * large"). */
+export const CLOUD_LIMIT = 50000;
 
-/** The candidate NPZ's midpoints and per-candidate values, coloured like the grasps (sRGB bytes). */
-export async function loadCandidates(id, measure, graspRange, download = null) {
-  const bytes = await (download ?? downloadCandidates(id));
+const CLOUD_ARRAYS = ['midpoints', 'friction_margin_deg', 'hold_margin'];
+
+/**
+ * The candidate cloud of set `id`: `{n, positions, values}` with `positions` (k*3 metres, the midpoints of k <=
+ * `limit` candidates), `values` {friction_margin_deg, hold_margin} (k each, or absent) and `n` the set's candidate
+ * count. The server sends only these arrays, decimated (GET .../candidates?arrays=...&max_rows=...); a server that
+ * sends the whole NPZ is decimated here.
+ */
+export async function loadCandidates(id, limit = CLOUD_LIMIT) {
+  const bytes = await getBytes(
+    `/v1/grasp-sets/${id}/candidates${q({ arrays: CLOUD_ARRAYS.join(','), max_rows: limit })}`,
+  );
   performance.mark('gg:candidates:fetched');
-  const arrays = await readNpzAsync(bytes, ['midpoints', 'friction_margin_deg', 'hold_margin']);
-  performance.mark('gg:candidates:inflated');
+  const arrays = await readNpzAsync(bytes, [...CLOUD_ARRAYS, 'row_count']);
+  performance.mark('gg:candidates:read');
   const mid = arrays.midpoints;
   if (!mid) throw new Error('the candidate NPZ has no midpoints');
-  const n = mid.shape[0];
-  const values = measure === 'hold_margin' ? arrays.hold_margin?.data : arrays.friction_margin_deg?.data;
-  const r = (values && range(values)) || graspRange;
-  const colours = new Uint8Array(n * 3);
-  for (let i = 0; i < n; i++) {
-    const c = values ? ramp(normalise(values[i], r)) : [0.45, 0.45, 0.5];
-    colours[i * 3] = c[0] * 255;
-    colours[i * 3 + 1] = c[1] * 255;
-    colours[i * 3 + 2] = c[2] * 255;
+  const k = mid.shape[0];
+  const stride = Math.max(1, Math.ceil(k / limit));
+  const values = {};
+  for (const name of ['friction_margin_deg', 'hold_margin']) {
+    if (arrays[name]) values[name] = stride === 1 ? arrays[name].data : arrays[name].data.filter((_, i) => i % stride === 0);
   }
-  performance.mark('gg:candidates:coloured');
-  return { n, positions: mid.data, colours, range: r, bytes: bytes.byteLength };
+  const positions = stride === 1 ? mid.data : mid.data.filter((_, i) => Math.floor(i / 3) % stride === 0);
+  const n = arrays.row_count ? Number(arrays.row_count.data[0]) : k;
+  return { n, positions, values };
+}
+
+/** Linear-light colours (k*3 floats) of a cloud's candidates by `measure` (hold_margin, else the friction margin). */
+export function cloudColours(cloud, measure) {
+  const values = measure === 'hold_margin' ? cloud.values.hold_margin : cloud.values.friction_margin_deg;
+  const r = values ? range(values) : null;
+  return { colours: linearRampColours(values ?? null, r, cloud.positions.length / 3), range: r };
 }
 
 export function status(el, text, kind = 'info') {

@@ -71,7 +71,8 @@ export class GraspViewer {
   /** `container`: the element the canvas fills; `label`: the canvas' accessible name. */
   constructor(container, { label = '3D view of the grasp set' } = {}) {
     this.container = container;
-    this.renderer = new THREE.WebGLRenderer({ antialias: !softwareRendering(), preserveDrawingBuffer: true });
+    // an opaque canvas whose drawing buffer is not preserved: the compositor takes each frame as it is, without a copy
+    this.renderer = new THREE.WebGLRenderer({ antialias: !softwareRendering(), preserveDrawingBuffer: false, alpha: false });
     this.renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
     this.renderer.setClearColor(BACKGROUND);
     const canvas = this.renderer.domElement;
@@ -92,8 +93,8 @@ export class GraspViewer {
     this.scene.add(this.camera);
     this.axes = new THREE.AxesHelper(0.02);
     this.scene.add(this.axes);
-    // one material for every candidate cloud, and a one-point cloud drawn from the first frame on: its shader
-    // program is compiled while the candidates download, not when they arrive (software GL takes ~1 s for it)
+    // one material for every candidate cloud, and a one-point cloud drawn from the first frame on: when the candidates
+    // come after the first frame (they are in it when they arrive in time), their shader program is ready
     this.pointsMaterial = new THREE.PointsMaterial({ size: 3, sizeAttenuation: false, vertexColors: true, depthWrite: false });
     const seed = new THREE.BufferGeometry();
     seed.setAttribute('position', new THREE.Float32BufferAttribute([0, 0, 0], 3));
@@ -128,7 +129,9 @@ export class GraspViewer {
   }
 
   requestRender() {
-    if (this.pending) return;
+    // nothing drawn yet and nobody waiting for a frame: an empty frame would only hold up the thread (on software GL
+    // a frame costs 50-150 ms) while the set's requests are answered
+    if (this.pending || (!this.part && !this.layers.size && !this.afterRender.length)) return;
     this.pending = true;
     requestAnimationFrame(() => {
       this.pending = false;
@@ -231,23 +234,30 @@ export class GraspViewer {
   }
 
   /**
-   * The candidate cloud of a layer: `positions` (n*3, metres; e.g. the NPZ's midpoints), `colours` (n*3 sRGB bytes).
-   * Drawn as points, at most `limit` of them (an even stride through the array when there are more).
-   * Returns how many are drawn.
+   * The candidate cloud of a layer: `positions` (n*3, metres; e.g. the NPZ's midpoints), `colours` (n*3, linear light:
+   * colour.js linearRampColours). Drawn as points, at most `limit` of them (an even stride through the array when there
+   * are more). Returns how many are drawn.
    */
   setCandidates(id, positions, colours, limit = 60000) {
     const layer = this.layers.get(id);
     if (!layer) return 0;
-    if (layer.candidates) this.scene.remove(layer.candidates);
+    if (layer.candidates) {
+      this.scene.remove(layer.candidates);
+      layer.candidates.geometry.dispose();
+    }
     const n = positions.length / 3;
     const stride = Math.max(1, Math.ceil(n / limit));
     const m = Math.ceil(n / stride);
     const p = new Float32Array(m * 3);
-    const c = new Float32Array(m * 3);
+    const c = stride === 1 && colours instanceof Float32Array ? colours : new Float32Array(m * 3);
     for (let i = 0, j = 0; i < n; i += stride, j++) {
-      for (let k = 0; k < 3; k++) {
-        p[j * 3 + k] = positions[i * 3 + k];
-        c[j * 3 + k] = (colours[i * 3 + k] / 255) ** 2.2; // sRGB bytes to linear
+      p[j * 3] = positions[i * 3];
+      p[j * 3 + 1] = positions[i * 3 + 1];
+      p[j * 3 + 2] = positions[i * 3 + 2];
+      if (c !== colours) {
+        c[j * 3] = colours[i * 3];
+        c[j * 3 + 1] = colours[i * 3 + 1];
+        c[j * 3 + 2] = colours[i * 3 + 2];
       }
     }
     const geometry = new THREE.BufferGeometry();
@@ -366,22 +376,6 @@ export class GraspViewer {
       mesh.setMatrixAt(i, m);
       mesh.instanceMatrix.needsUpdate = true;
     }
-  }
-
-  /** Share of pixels that differ from the background in the last frame (tests: the canvas is not blank). */
-  drawnShare() {
-    const gl = this.renderer.getContext();
-    const w = gl.drawingBufferWidth;
-    const h = gl.drawingBufferHeight;
-    const px = new Uint8Array(w * h * 4);
-    gl.readPixels(0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, px);
-    const bg = new THREE.Color(BACKGROUND);
-    const [r, g, b] = [bg.r, bg.g, bg.b].map((v) => Math.round(v * 255));
-    let differ = 0;
-    for (let i = 0; i < px.length; i += 4) {
-      if (Math.abs(px[i] - r) + Math.abs(px[i + 1] - g) + Math.abs(px[i + 2] - b) > 12) differ++;
-    }
-    return differ / (w * h);
   }
 
   dispose() {

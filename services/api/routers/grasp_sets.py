@@ -6,6 +6,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Path, Query, Request, Response
 
 from ...common.storage import Storage
+from ..crud import candidates
 from ..crud import grasp_sets as crud
 from ..deps import PagingDep, ReadDep, ReadSessionDep, SessionDep, StorageDep, WriteDep
 from ..http import IMMUTABLE, REVALIDATE, BlobCache, blob_response, etag_matches, not_modified
@@ -86,15 +87,46 @@ def get_grasp_set(request: Request, grasp_set_id: GraspSetId, principal: ReadDep
 
 @router.get(
     "/grasp-sets/{grasp_set_id}/candidates",
-    summary="The candidate NPZ (CONTRACT.md) of a grasp set",
+    summary="The candidate NPZ (CONTRACT.md) of a grasp set, or a view of some of its arrays over fewer rows",
+    description=(
+        "Without query parameters: the stored NPZ, byte for byte (immutable, ETag the blob's digest). With `arrays` "
+        "or `max_rows`: an NPZ of stored (uncompressed) members holding the named arrays (all when `arrays` is "
+        "absent; names the set lacks are left out), and with `max_rows` only rows 0, s, 2s, ... of every array over "
+        "the n candidates, s = ceil(n / max_rows), plus `rows (k,) int64` (the kept rows' indices in the full NPZ) "
+        "and `row_count () int64` (n); `roll_angles_rad`, `medoids` and `center_of_mass` are kept whole "
+        "(docs/API.md)."
+    ),
     response_class=Response,
     responses={200: {"content": {"application/octet-stream": {}}}, **problems(304, 404, 422)},
 )
 def get_candidates(
-    request: Request, grasp_set_id: GraspSetId, principal: ReadDep, session: ReadSessionDep, storage: StorageDep
+    request: Request,
+    grasp_set_id: GraspSetId,
+    principal: ReadDep,
+    session: ReadSessionDep,
+    storage: StorageDep,
+    arrays: Annotated[
+        str | None,
+        Query(
+            pattern=candidates.ARRAY_NAMES,
+            description="comma-separated array names to return, e.g. `midpoints,friction_margin_deg` (at most 32)",
+            examples=["midpoints,friction_margin_deg,hold_margin"],
+        ),
+    ] = None,
+    max_rows: Annotated[
+        int | None,
+        Query(
+            ge=1,
+            le=candidates.MAX_ROWS,
+            description="at most this many candidates: an even stride through the rows, starting at row 0",
+            examples=[50000],
+        ),
+    ] = None,
 ) -> Response:
     gs = crud.get_grasp_set(session, grasp_set_id)
-    return _artifact(request, storage, gs.candidates_key, f"grasp-set-{gs.id}-candidates.npz")
+    if arrays is None and max_rows is None:
+        return _artifact(request, storage, gs.candidates_key, f"grasp-set-{gs.id}-candidates.npz")
+    return candidates.view_response(request, gs.id, gs.candidates_key, arrays=arrays, max_rows=max_rows)
 
 
 @router.get(

@@ -1,6 +1,6 @@
 // One grasp set in 3D with its numbers: the part, the gripper at every grasp coloured by a margin, the candidate
 // cloud, the selected grasp's numbers and free rolls, the criteria funnel, coverage, parameters, timings, and release
-// or withdraw. Performance marks gg:set:drawn and gg:set:candidates time the load (bench/bench_ui.py reads them).
+// or withdraw. Performance marks gg:set:drawn, gg:set:candidates and gg:set:complete time the load (bench/bench_ui.py).
 import { explain, getJson } from '../api.js';
 import { MEASURES } from '../colour.js';
 import { badge, clear, facts, h, mm, num, table, when } from '../dom.js';
@@ -9,16 +9,20 @@ import {
   confirmChange,
   graspColours,
   legend,
+  cloudColours,
   loadCandidates,
   loadSet,
   servedBy,
   setSummary,
   stateBadges,
-  downloadCandidates,
   status,
 } from '../shared.js';
-import { GraspViewer } from '../viewer.js';
+import { GraspViewer, softwareRendering } from '../viewer.js';
 import { historyTable } from './pair.js';
+
+/** How long the first frame waits for the candidate cloud and the side pane's requests once the part is in (ms, on
+ * software GL, where a frame is expensive). */
+const FIRST_FRAME_WAIT_MS = 250;
 
 export function funnel(stats) {
   const total = stats.pairs_total ?? stats.pairs ?? null;
@@ -165,13 +169,29 @@ export async function setPage(main, id) {
   status(statusEl, `Loading set ${id}…`);
 
   let bundle;
-  let download = null;
-  // the requests first, then the WebGL context (creating it blocks this thread for a while on software GL);
-  // the candidates download once the export is in (not before: it would slow the export down), beside the part
-  const loading = loadSet(id, () => (download = downloadCandidates(id)));
+  let viewer = null;
+  let left = false; // the page was left: nothing more to draw
+  main.addEventListener('page:leave', () => ((left = true), viewer?.dispose()), { once: true });
+  // the export and beside it the candidate cloud (a decimated view: a few MB at most) at once; the WebGL context once
+  // the export is in and the part is on its way (creating it blocks this thread for 50-100 ms on software GL)
+  let served; // what the catalogue serves for the pair, history and job: asked for as soon as the export names them
+  let history;
+  let jobRecord;
+  const loading = loadSet(id, {
+    onExport: (exportJson, summaryP) => {
+      const { name: object } = exportJson.object;
+      const { name: gripper } = exportJson.gripper;
+      served = servedBy(object, gripper).catch(() => null);
+      history = historyTable(object, gripper, 5).catch((err) => h('p', { class: 'status error' }, explain(err)));
+      jobRecord = summaryP.then((s) => (s?.job ? getJson(`/v1/jobs/${s.job}`) : null));
+      jobRecord.catch(() => {}); // shown below
+      if (!left) viewer = new GraspViewer(viewerEl, { label: `3D view of grasp set ${id}` });
+    },
+  });
   loading.catch(() => {}); // handled below
-  const viewer = new GraspViewer(viewerEl, { label: `3D view of grasp set ${id}` });
-  main.addEventListener('page:leave', () => viewer.dispose(), { once: true });
+  const cloudLoading = loadCandidates(id);
+  let cloud = null; // the cloud once loaded: {n, positions, values, drawn}
+  cloudLoading.then((c) => (cloud = c), () => {}); // errors: drawCandidates() below
   try {
     bundle = await loading;
   } catch (err) {
@@ -179,6 +199,7 @@ export async function setPage(main, id) {
     viewerEl.dataset.state = 'error';
     return;
   }
+  if (left) return;
   const { exportJson, summary, part, meshes } = bundle;
   const grasps = exportJson.grasps ?? [];
   for (const [key, m] of Object.entries(MEASURES)) {
@@ -186,24 +207,6 @@ export async function setPage(main, id) {
   }
   const measure = () => colourSelect.value || 'friction_margin_deg';
   let colouring = graspColours(grasps, measure());
-
-  viewer.renderer.domElement.setAttribute(
-    'aria-label',
-    `3D view of grasp set ${id}: ${grasps.length} grasps on ${exportJson.object.name}`,
-  );
-  viewer.setPart(part.geometry, part.points);
-  try {
-    viewer.setGrasps('a', exportJson, colouring.colours, { meshes, opacity: 0.8 });
-  } catch (err) {
-    status(statusEl, `The gripper cannot be drawn: ${err.message}`, 'error');
-  }
-  viewer.fit();
-  clear(legendEl, legend(colouring.range, MEASURES[measure()].label));
-  await viewer.rendered();
-  performance.mark('gg:set:drawn');
-  performance.measure('gg:set:drawn', 'gg:set:start', 'gg:set:drawn');
-  viewerEl.dataset.state = 'drawn';
-  status(statusEl, null);
 
   // the grasp list: one real button per grasp (the keyboard's way to select)
   const rows = grasps.map((g, i) =>
@@ -244,8 +247,7 @@ export async function setPage(main, id) {
   showGrippers.addEventListener('change', () => viewer.setLayerVisible('a', showGrippers.value === 'all'));
 
   // header, state and actions
-  async function renderHeader() {
-    const served = await servedBy(exportJson.object.name, exportJson.gripper.name).catch(() => null);
+  function renderHeader(servedNow) {
     const pairLink = `#/pair/${encodeURIComponent(exportJson.object.name)}/${encodeURIComponent(exportJson.gripper.name)}`;
     clear(
       headerEl,
@@ -257,7 +259,7 @@ export async function setPage(main, id) {
         `${exportJson.object.name} v${exportJson.object.version} × ${exportJson.gripper.name}`,
         summary ? ` v${summary.gripper_version}` : '',
         ` · ${grasps.length} grasps · ${num(exportJson.stats?.candidates)} candidates `,
-        ...stateBadges(summary, served),
+        ...stateBadges(summary, servedNow),
       ),
       summary
         ? h(
@@ -270,27 +272,34 @@ export async function setPage(main, id) {
         : null,
     );
   }
-  async function renderHistory(open = false) {
+  function renderHistory(body, open = false) {
     const { name: object } = exportJson.object;
     const { name: gripper } = exportJson.gripper;
-    const body = await historyTable(object, gripper, 5).catch((err) => h('p', { class: 'status error' }, explain(err)));
     clear(historyEl, h('summary', {}, `Releases and withdrawals of ${object} × ${gripper} (newest 5)`), body);
     historyEl.open = open;
   }
   async function after() {
-    const fresh = await setSummary(id, exportJson.object.name, exportJson.gripper.name).catch(() => null);
+    const { name: object } = exportJson.object;
+    const { name: gripper } = exportJson.gripper;
+    const [fresh, servedNow, body] = await Promise.all([
+      setSummary(id, object, gripper).catch(() => null),
+      servedBy(object, gripper).catch(() => null),
+      historyTable(object, gripper, 5).catch((err) => h('p', { class: 'status error' }, explain(err))),
+    ]);
     Object.assign(summary, fresh ?? {});
-    await Promise.all([renderHeader(), renderHistory(true)]);
+    renderHeader(servedNow);
+    renderHistory(body, true);
   }
-  const header = Promise.all([renderHeader(), renderHistory()]);
+  renderHeader(null); // the title and actions at once; the catalogue's state when it is in
+  const header = Promise.all([served.then(renderHeader), history.then((body) => renderHistory(body))]);
 
   // details: funnel, coverage, parameters, timings, the job (its times arrive when they do)
   const stats = exportJson.stats ?? {};
   const jobEl = h('div');
-  const job = summary?.job
-    ? getJson(`/v1/jobs/${summary.job}`)
-        .then((j) =>
-          clear(
+  const job = jobRecord
+    .then((j) =>
+      j
+        ? clear(
             jobEl,
             facts([
               ['job', h('a', { href: `#/jobs/${j.id}` }, j.id)],
@@ -300,10 +309,10 @@ export async function setPage(main, id) {
               j.started_at &&
                 j.finished_at && ['run time', `${((new Date(j.finished_at) - new Date(j.started_at)) / 1000).toFixed(1)} s`],
             ]),
-          ),
-        )
-        .catch(() => clear(jobEl, h('p', { class: 'muted' }, 'The job that made this set is not readable with this token.')))
-    : null;
+          )
+        : null,
+    )
+    .catch(() => clear(jobEl, h('p', { class: 'muted' }, 'The job that made this set is not readable with this token.')));
   clear(
     detailsEl,
     h('h2', {}, 'How the set was made'),
@@ -319,35 +328,71 @@ export async function setPage(main, id) {
     kv(exportJson.gripper, `Gripper ${exportJson.gripper.name}`),
   );
 
-  // the candidate cloud, after the grasps are on screen
-  let cloud = null;
-  async function drawCandidates() {
+  // the candidate cloud: in the first frame when it is in by then (one software-GL frame less), else in a later one
+  function showCloud() {
     performance.mark('gg:candidates:start');
-    candidatesNote.textContent = '(loading…)';
+    const { colours } = cloudColours(cloud, measure());
+    cloud.drawn = viewer.setCandidates('a', cloud.positions, colours);
+    viewer.setCandidatesVisible('a', showCandidates.checked);
+    candidatesNote.textContent =
+      cloud.drawn < cloud.n ? `(${num(cloud.drawn)} of ${num(cloud.n)} drawn)` : `(${num(cloud.n)})`;
+  }
+  function cloudOnScreen() {
+    performance.mark('gg:set:candidates');
+    performance.measure('gg:set:candidates', 'gg:set:start', 'gg:set:candidates');
+  }
+  async function drawCandidates() {
     try {
-      cloud = await loadCandidates(id, measure(), colouring.range, download);
-      download = null; // a change of colouring downloads again (the browser's cache answers)
-      const drawn = viewer.setCandidates('a', cloud.positions, cloud.colours);
-      cloud.drawn = drawn;
-      viewer.setCandidatesVisible('a', showCandidates.checked);
-      candidatesNote.textContent =
-        drawn < cloud.n ? `(${num(drawn)} of ${num(cloud.n)} drawn)` : `(${num(cloud.n)})`;
+      await cloudLoading;
+      showCloud();
       await viewer.rendered();
     } catch (err) {
       candidatesNote.textContent = err.status === 404 ? '(none stored)' : `(not shown: ${explain(err)})`;
     }
+    cloudOnScreen();
   }
+  // the first frame, once the side pane is built. On software GL a frame blocks this thread for 100-500 ms, and what
+  // arrives meanwhile waits behind it (and behind the compositor's copy of the canvas): there the frame waits for the
+  // cloud and the side pane's requests, a quarter of a second at most
+  await Promise.race([
+    Promise.allSettled([cloudLoading, header, job]),
+    new Promise((resolve) => setTimeout(resolve, softwareRendering() ? FIRST_FRAME_WAIT_MS : 0)),
+  ]);
+  if (left) return;
+  viewer.renderer.domElement.setAttribute(
+    'aria-label',
+    `3D view of grasp set ${id}: ${grasps.length} grasps on ${exportJson.object.name}`,
+  );
+  viewer.setPart(part.geometry, part.points);
+  try {
+    viewer.setGrasps('a', exportJson, colouring.colours, { meshes, opacity: 0.8 });
+  } catch (err) {
+    status(statusEl, `The gripper cannot be drawn: ${err.message}`, 'error');
+  }
+  viewer.fit();
+  clear(legendEl, legend(colouring.range, MEASURES[measure()].label));
+  const cloudFirst = cloud !== null;
+  if (cloudFirst) showCloud();
+  else candidatesNote.textContent = '(loading…)';
+  await viewer.rendered();
+  performance.mark('gg:set:drawn');
+  performance.measure('gg:set:drawn', 'gg:set:start', 'gg:set:drawn');
+  if (cloudFirst) cloudOnScreen();
+  const candidatesDrawn = cloudFirst ? null : drawCandidates();
+  viewerEl.dataset.state = 'drawn';
+  status(statusEl, null);
+
   showCandidates.addEventListener('change', () => viewer.setCandidatesVisible('a', showCandidates.checked));
-  colourSelect.addEventListener('change', async () => {
+  colourSelect.addEventListener('change', () => {
     colouring = graspColours(grasps, measure());
     viewer.recolour('a', colouring.colours);
     clear(legendEl, legend(colouring.range, MEASURES[measure()].label));
-    if (cloud) await drawCandidates();
+    if (cloud?.drawn !== undefined) showCloud();
   });
-  await drawCandidates();
-  performance.mark('gg:set:candidates');
-  performance.measure('gg:set:candidates', 'gg:set:start', 'gg:set:candidates');
+  await candidatesDrawn;
   await Promise.all([header, job]);
+  performance.mark('gg:set:complete');
+  performance.measure('gg:set:complete', 'gg:set:start', 'gg:set:complete');
   viewerEl.dataset.state = 'complete';
   viewerEl.dataset.candidates = String(cloud?.n ?? 0);
   viewerEl.dataset.drawnCandidates = String(cloud?.drawn ?? 0);
