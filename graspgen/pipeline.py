@@ -835,7 +835,8 @@ def _seat_judge(spec: GripperSpec, extras: _Extras, mu: float, params: Params) -
         com = quality.center_of_mass(part.mesh, part.points)
         hold = SeatHold(com, _hold.hold_load(extras.mass_kg, params.accel), spec.grip_force, mu)
     tree = _collision.build_tree(part.mesh.vertices, part.mesh.faces)
-    return SeatJudge(tree, spec.solids(), quality.half_angle_deg(mu, params.safety_factor), hold)
+    half = quality.half_angle_deg(mu, params.safety_factor)
+    return SeatJudge(tree, spec.solids(), half, hold, _collision.triangle_bounds(tree))
 
 
 def _seat_choose(

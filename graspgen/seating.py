@@ -88,6 +88,8 @@ class SeatJudge:
     solids: GripperSolids
     half_angle_deg: float
     hold: SeatHold | None
+    #: the part's triangle bounds (collision.triangle_bounds): seats only move the triangles near the fingers
+    bounds: tuple[np.ndarray, np.ndarray] | None = None
 
     def seat(self, T_object_grasp: np.ndarray, width: float) -> Seated | None:
         """The grasp T_object_grasp (4, 4) of sampled contact distance `width` (m) on its seat; None when a finger
@@ -100,7 +102,9 @@ class SeatJudge:
         fails anyway."""
         found: list[tuple[Seat, np.ndarray, np.ndarray, float] | None] = []
         for T, width in zip(T_object_grasp, widths, strict=True):
-            seat = _collision.seat_fingers(self.tree, self.solids, T, float(width), TOLERANCES.inner_margin)
+            seat = _collision.seat_fingers(
+                self.tree, self.solids, T, float(width), TOLERANCES.inner_margin, bounds=self.bounds
+            )
             if seat is None:
                 found.append(None)
                 continue

@@ -20,7 +20,7 @@ from ._bits import MAX_ROLLS, any_free, popcount
 from ._meshsolid import MeshSet, MeshSolid, mesh_solid
 from ._points import STATS, free_rolls, free_rolls_of_pairs, free_rolls_stats
 from ._regions import CollisionModel, Region, approach_reach, collision_model
-from ._seat import Seat, seat_fingers, seat_friction_margin_deg
+from ._seat import Seat, seat_fingers, seat_friction_margin_deg, triangle_bounds
 from ._shapes import Box, Cuboid
 from ._solids import GripperSolids
 from ._triangles import mesh_free_rolls, mesh_free_rolls_of_pairs
@@ -62,6 +62,7 @@ __all__ = [
     "prism_meets_triangle",
     "seat_fingers",
     "seat_friction_margin_deg",
+    "triangle_bounds",
     "tri_meets_solid",
     "triangles_near_segment",
 ]

@@ -22,10 +22,11 @@ from numba import njit
 from ._tritree import COUNT, LEFT, RIGHT, START, MeshTree, node_misses_box
 
 if TYPE_CHECKING:
+    from ._meshsolid import MeshSet
     from ._solids import GripperSolids
     from ._tritree import TriangleTree
 
-__all__ = ["Seat", "seat_fingers", "SEAT_TOLERANCE", "seat_friction_margin_deg"]
+__all__ = ["Seat", "seat_fingers", "SEAT_TOLERANCE", "seat_friction_margin_deg", "triangle_bounds"]
 
 #: features that meet the part within this distance of the first one are contacts of the same seat, metres
 SEAT_TOLERANCE = 2.0e-5
@@ -174,19 +175,32 @@ def _first_contact(
     return tmin, count
 
 
+def triangle_bounds(part: MeshTree) -> tuple[np.ndarray, np.ndarray]:
+    """Each triangle's axis-aligned bounds (lo, hi), (n, 3) each, object frame: seat_fingers' prefilter, computed
+    once per part."""
+    return part.triangles.min(axis=1), part.triangles.max(axis=1)
+
+
 def seat_fingers(
-    part: MeshTree, solids: GripperSolids, T_object_grasp: np.ndarray, width: float, margin: float
+    part: MeshTree,
+    solids: GripperSolids,
+    T_object_grasp: np.ndarray,
+    width: float,
+    margin: float,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Seat | None:
     """Seat both fingers of a gripper from CAD (GripperSolids with meshes) on the part at the grasp T_object_grasp
     (4, 4) of contact distance `width`: each closes from width / 2 + margin along its closing direction until it
     first meets the part's triangles (at most to the grasp's midplane). None when a finger reaches the midplane
-    without touching."""
+    without touching. `bounds` (triangle_bounds of the part) lets only the triangles near the fingers' travel be
+    moved into the grasp frame; the seat is the same without it."""
     R, o = T_object_grasp[:3, :3], T_object_grasp[:3, 3]
-    tri = (part.triangles - o) @ R  # the part in the grasp frame
-    nrm = part.normals @ R
     s0 = width / 2 + margin
-    travels, points, normals = [], [], []
     assert solids.meshes is not None  # a gripper from CAD: the pipeline seats only fingers with meshes
+    keep = slice(None) if bounds is None else _near_travel(solids.meshes, R, o, s0, bounds)
+    tri = (part.triangles[keep] - o) @ R  # the part in the grasp frame
+    nrm = part.normals[keep] @ R
+    travels, points, normals = [], [], []
     for side, solid in ((-1, solids.meshes.left), (1, solids.meshes.right)):
         # the part in the finger's frame at s0: (x - s0, y, z) for +X; turned half a turn about Z for -X
         flip = np.array([side, side, 1.0])
@@ -220,6 +234,27 @@ def seat_fingers(
         normals.append((nn * flip) @ R.T)
     seated = 2 * s0 - (travels[0] + margin) - (travels[1] + margin)
     return Seat((travels[0], travels[1]), float(seated), (points[0], points[1]), (normals[0], normals[1]))
+
+
+def _near_travel(
+    meshes: MeshSet, R: np.ndarray, o: np.ndarray, s0: float, bounds: tuple[np.ndarray, np.ndarray]
+) -> np.ndarray:
+    """Indices of the triangles whose bounds meet the box, in the grasp frame, that holds both fingers over their
+    whole travel (from s0 to the midplane): that box's axis-aligned bounds in the object frame (centre o + R c,
+    half-extents |R| h), a conservative prefilter."""
+    reach = np.zeros(3)
+    zlo, zhi = np.inf, -np.inf
+    for solid in (meshes.left, meshes.right):
+        lo, hi = np.asarray(solid.bounds.lo), np.asarray(solid.bounds.hi)
+        reach = np.maximum(reach, np.maximum(np.abs(lo), np.abs(hi)))
+        zlo, zhi = min(zlo, float(lo[2])), max(zhi, float(hi[2]))
+    half = np.array([s0 + reach[0], reach[1], (zhi - zlo) / 2])
+    centre = R @ np.array([0.0, 0.0, (zhi + zlo) / 2]) + o
+    h = np.abs(R) @ half + SEAT_TOLERANCE
+    lo_t, hi_t = bounds
+    hit = np.all(hi_t >= centre - h, axis=1) & np.all(lo_t <= centre + h, axis=1)
+    found: np.ndarray = np.flatnonzero(hit)
+    return found
 
 
 def _merge(points: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

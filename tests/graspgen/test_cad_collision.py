@@ -325,3 +325,28 @@ def test_every_exported_grasp_of_a_cad_gripper_passes_c_and_e_on_its_seat():
         assert g["friction_margin_deg"] == pytest.approx(s.friction_margin_deg) and g["friction_margin_deg"] >= 0
         assert g["hold_margin"] == pytest.approx(s.hold_margin, abs=1e-6) and g["hold_margin"] >= 1.0
         assert g["width"] == pytest.approx(s.seat.width)
+
+
+def test_the_seats_triangle_prefilter_changes_no_seat():
+    """seat_fingers with the part's triangle bounds (only the triangles near the fingers' travel moved into the grasp
+    frame) gives exactly the seat of the whole part, on tless_04 or the thick ring at exported V-groove grasps."""
+    import graspgen
+    from graspgen.collision import seat_fingers, triangle_bounds
+
+    path = SHARED / "tless_04.stl"
+    part = load_part(path, units="mm") if path.exists() else example_part("thick-ring")
+    spec = GripperSpec.load(EXAMPLES / "pgn-80-vgroove.json")
+    gs = graspgen.generate(part, spec, points=1500, k1=6, k2=2, hold="off")
+    tree = build_tree(part.mesh.vertices, part.mesh.faces)
+    bounds = triangle_bounds(tree)
+    assert gs.grasps
+    for g in gs.grasps:
+        T, w = np.array(g["pose"]), float(gs.candidates.widths[g["candidate"]])
+        whole, near = (
+            seat_fingers(tree, spec.solids(), T, w, 1e-3),
+            seat_fingers(tree, spec.solids(), T, w, 1e-3, bounds),
+        )
+        assert whole is not None and near is not None
+        assert whole.width == near.width and whole.travel == near.travel
+        for k in range(2):
+            assert np.array_equal(whole.points[k], near.points[k]) and np.array_equal(whole.normals[k], near.normals[k])
