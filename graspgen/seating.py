@@ -8,8 +8,11 @@ the sampled pairs (criteria (a)-(e) over millions of pairs); the grasps to expor
 
 - (c): each finger's push along the closing axis lies within the friction cones of its contacts
   (collision.seat_friction_margin_deg >= 0);
-- (e): the hold margin (hold.hold_margins) with each finger's force at the centre of its contacts, its normal the
-  mean of theirs, and its torsion radius from the contacts' spread (`seat_torsion_radius`), >= 1.
+- (e): the hold margin (hold.hold_margins) with both fingers' forces along the closing axis on the line through the
+  midpoint of their contacts' centres (as far apart along the axis as those centres), each finger's normal the mean
+  of its contacts' and its torsion radius from their spread (`seat_torsion_radius`), >= 1. The couple of two
+  fingers whose contacts lie off one line (seated on different edges) is not modelled: rigid fingers turn the part
+  until it seats, which the simulation (validate=True) shows.
 
 A grasp that fails on its seat is replaced by the nearest member of its cluster that passes (nearest in contact
 midpoint, then closing axis), trying at most `SEAT_TRIES` members; a cluster without one is left out of the export.
@@ -131,8 +134,13 @@ class SeatJudge:
         normals = np.empty((len(found), 2, 3))
         rho = np.empty((len(found), 2))
         for q, (seat, _, _, _) in enumerate(found):
+            x = axes[q]
+            c0, c1 = seat.points[0].mean(axis=0), seat.points[1].mean(axis=0)
+            # both fingers push along the closing axis x: the forces act on the line along x through the centres'
+            # midpoint, at the centres' distance along x (hold_margins reads the axis from the two contacts)
+            mid, half = (c0 + c1) / 2, abs(float((c1 - c0) @ x)) / 2
+            centres[q, 0], centres[q, 1] = mid - half * x, mid + half * x
             for k in range(2):
-                centres[q, k] = seat.points[k].mean(axis=0)
                 n = seat.normals[k].mean(axis=0)
                 normals[q, k] = n / max(float(np.linalg.norm(n)), 1e-300)
                 rho[q, k] = seat_torsion_radius(seat.points[k], axes[q])
