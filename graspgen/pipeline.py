@@ -714,8 +714,9 @@ def recluster(
             options=options,
             part_inputs={"mass_kg": mass_kg, "density": density, "mesh": mesh, "units": units},
         )
-    if isinstance(candidates, SuctionCandidates) or isinstance(gripper, SuctionSpec):
-        raise InvalidParameterError("a suction cup's candidates or spec for a parallel set", field="gripper")
+    assert not isinstance(candidates, SuctionCandidates)  # _export_kind refused them for a parallel set
+    if isinstance(gripper, SuctionSpec):
+        raise InvalidParameterError("a suction cup's spec for a parallel set", field="gripper")
     t_all = time.perf_counter()
     cands = candidates if isinstance(candidates, Candidates) else load_candidates(candidates)
     if gripper is None:

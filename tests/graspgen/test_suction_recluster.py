@@ -162,6 +162,9 @@ def test_candidates_of_the_other_kind_are_refused(tmp_path):
         with pytest.raises(InvalidParameterError) as e:
             graspgen.recluster(cands, export, k1=2, k2=1)
         assert e.value.field == "candidates"
+    with pytest.raises(InvalidParameterError) as e:  # a cup's spec for a parallel set
+        graspgen.recluster(jaw, jaw_export, k1=2, k2=1, gripper=cup.gripper)
+    assert e.value.field == "gripper"
     (tmp_path / "jaw.npz").write_bytes(npz_bytes(jaw.arrays()))
     with pytest.raises(InvalidCandidatesError, match="seal_strain"):  # a jaw NPZ under a suction export
         graspgen.recluster(tmp_path / "jaw.npz", cup.to_json(), k1=2, k2=1)
