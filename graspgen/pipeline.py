@@ -25,7 +25,8 @@ from .kinds import check_params_for_kind, gripper_from_dict
 from .params import Params, QualityOptions, from_keywords, keyword_parameters
 from .parts import Part, load_part
 from .seating import SEAT_TRIES, Seated, SeatHold, SeatJudge, nearest_members
-from .suction import SuctionGraspSet, SuctionSpec, generate_suction
+from .suction import KIND as SUCTION
+from .suction import SuctionCandidates, SuctionGraspSet, SuctionSpec, generate_suction, recluster_suction
 from .transforms import choose_roll, grasp_frames, roll_angles_rad
 
 if TYPE_CHECKING:
@@ -605,8 +606,68 @@ def _hold_diagnosis(best: float, spec: GripperSpec, mass: float, params: Params)
     }
 
 
+@overload
 def recluster(
-    candidates: str | os.PathLike[str] | Candidates,
+    candidates: Candidates,
+    previous_export: dict[str, Any],
+    *,
+    k1: int,
+    k2: int,
+    seed: int = ...,
+    recording: Any = None,
+    progress: Progress | None = None,
+    mass_kg: float | None = None,
+    density: float | None = None,
+    mesh: str | os.PathLike[str] | trimesh.Trimesh | Part | None = None,
+    units: str | None = None,
+    gripper: GripperSpec | None = None,
+    options: QualityOptions | None = None,
+    **quality: Any,
+) -> GraspSet: ...
+
+
+@overload
+def recluster(
+    candidates: SuctionCandidates,
+    previous_export: dict[str, Any],
+    *,
+    k1: int,
+    k2: int,
+    seed: int = ...,
+    recording: Any = None,
+    progress: Progress | None = None,
+    mass_kg: float | None = None,
+    density: float | None = None,
+    mesh: str | os.PathLike[str] | trimesh.Trimesh | Part | None = None,
+    units: str | None = None,
+    gripper: SuctionSpec | None = None,
+    options: QualityOptions | None = None,
+    **quality: Any,
+) -> SuctionGraspSet: ...
+
+
+@overload
+def recluster(
+    candidates: str | os.PathLike[str],
+    previous_export: dict[str, Any],
+    *,
+    k1: int,
+    k2: int,
+    seed: int = ...,
+    recording: Any = None,
+    progress: Progress | None = None,
+    mass_kg: float | None = None,
+    density: float | None = None,
+    mesh: str | os.PathLike[str] | trimesh.Trimesh | Part | None = None,
+    units: str | None = None,
+    gripper: GripperSpec | SuctionSpec | None = None,
+    options: QualityOptions | None = None,
+    **quality: Any,
+) -> GraspSet | SuctionGraspSet: ...
+
+
+def recluster(
+    candidates: str | os.PathLike[str] | Candidates | SuctionCandidates,
     previous_export: dict[str, Any],
     *,
     k1: int,
@@ -618,10 +679,10 @@ def recluster(
     density: float | None = None,
     mesh: str | os.PathLike[str] | trimesh.Trimesh | Part | None = None,
     units: str | None = None,
-    gripper: GripperSpec | None = None,
+    gripper: GripperSpec | SuctionSpec | None = None,
     options: QualityOptions | None = None,
     **quality: Any,
-) -> GraspSet:
+) -> GraspSet | SuctionGraspSet:
     """A new selection from stored candidates with other k1 / k2 / seed, without regenerating them.
 
     The quality options (select, validate, repair_limit, sim_workers: the fields of `QualityOptions`) as in
@@ -629,11 +690,33 @@ def recluster(
     quality terms, need the part: `mesh` (a Part, a mesh in metres, or a path with `units`). `gripper`: the spec the
     set was made with, required when it has geometry (the export names its mesh files and their digests, not their
     contents); its to_dict() must be the export's `gripper`.
+
+    A suction set (the export's `gripper.kind` "suction", its candidates a suction NPZ or SuctionCandidates) is
+    clustered again as generate() clusters it (graspgen.suction.recluster_suction): the same candidates and
+    k1 / k2 / seed give the same grasps. Its candidates were judged with the set's mass and need no part, so `mass_kg`,
+    `density`, `mesh` and `units` are refused for it, and so are validate and best-near-medoid selection (as generate
+    refuses them for a cup); the result is a SuctionGraspSet.
     """
     from .export import load_candidates
 
     report = progress or _noop
     (options,) = from_keywords("recluster", quality, (QualityOptions, options))
+    if _export_kind(previous_export, candidates) == SUCTION:
+        return _recluster_suction(
+            candidates,
+            previous_export,
+            k1=k1,
+            k2=k2,
+            seed=seed,
+            recording=recording,
+            progress=progress,
+            gripper=gripper,
+            options=options,
+            part_inputs={"mass_kg": mass_kg, "density": density, "mesh": mesh, "units": units},
+        )
+    assert not isinstance(candidates, SuctionCandidates)  # _export_kind refused them for a parallel set
+    if isinstance(gripper, SuctionSpec):
+        raise InvalidParameterError("a suction cup's spec for a parallel set", field="gripper")
     t_all = time.perf_counter()
     cands = candidates if isinstance(candidates, Candidates) else load_candidates(candidates)
     if gripper is None:
@@ -683,6 +766,38 @@ def recluster(
 
         record_run(recording, result, sample_points=None, sample_normals=None)
     return result
+
+
+def _export_kind(previous_export: dict[str, Any], candidates: object) -> str:
+    """The gripper kind of a grasp set's export ("parallel" without `gripper.kind`); InvalidParameterError when the
+    candidates given as an object are of the other kind."""
+    grip = previous_export.get("gripper")
+    kind = grip.get("kind", PARALLEL) if isinstance(grip, dict) else PARALLEL
+    if isinstance(candidates, SuctionCandidates if kind != SUCTION else Candidates):
+        raise InvalidParameterError(f"the candidates are not of the export's gripper kind ({kind})", field="candidates")
+    return str(kind)
+
+
+def _recluster_suction(
+    candidates: str | os.PathLike[str] | Candidates | SuctionCandidates,
+    previous_export: dict[str, Any],
+    *,
+    gripper: GripperSpec | SuctionSpec | None,
+    part_inputs: dict[str, Any],
+    **keywords: Any,
+) -> SuctionGraspSet:
+    """recluster() of a suction set: refuses what a cup's clustering cannot use, then recluster_suction."""
+    for name, value in part_inputs.items():
+        if value is not None:
+            raise InvalidParameterError(
+                f"{name} is not taken when re-clustering a suction set: its candidates were judged with the set's "
+                "mass and clustering needs no part (generate again for another mass)",
+                field=name,
+            )
+    if isinstance(gripper, GripperSpec):
+        raise InvalidParameterError("a parallel gripper's spec for a suction set", field="gripper")
+    assert not isinstance(candidates, Candidates)  # _export_kind refused a parallel set's candidates
+    return recluster_suction(candidates, previous_export, gripper=gripper, **keywords)
 
 
 recluster.__signature__ = _signature_with_fields(recluster, QualityOptions)  # type: ignore[attr-defined]  # inspect reads it; mypy does not model function attributes

@@ -4,7 +4,9 @@ The export has the jaws' format with `gripper.kind` "suction": each grasp's `con
 point (the lip's centre on the surface, its outward normal), `pose` is T_object_grasp with the origin at the contact
 and +Z the approach. The NPZ has `contacts (n, 1, 3)`, `normals (n, 1, 3)`, `midpoints (n, 3)` (the contacts, for
 readers of either kind), `axes (n, 3)` (the approaches), `free_rolls (n, R)`, `roll_angles_rad (R,)`, `labels`,
-`medoids`, and the suction terms `seal_strain (n,)`, `tilt_deg (n,)` and, when `hold` ran, `hold_margin (n,)`.
+`medoids`, and the suction terms `seal_strain (n,)`, `tilt_deg (n,)` and, when `hold` ran, `hold_margin (n,)` and
+`hold_limit (n,) int8` (the constraint that sets each margin, an index into `LIMITS`: friction, peel, pull), so that
+graspgen.recluster exports the same grasps from the NPZ as the run did.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import numpy as np
 from ..errors import InvalidCandidatesError
 from ..export import ExportMethods
 from ..params import Params
+from ._hold import LIMITS
 from ._spec import SuctionSpec
 
 __all__ = ["SuctionCandidates", "SuctionGraspSet", "load_suction_candidates"]
@@ -38,6 +41,8 @@ class SuctionCandidates:
     medoids: np.ndarray  # (m,) int64, export order
     #: (n,) the load each cup resists over the load required, when criterion hold ran
     hold_margin: np.ndarray | None = None
+    #: (n,) int8, with hold_margin: the constraint that sets each margin (an index into LIMITS)
+    hold_limit: np.ndarray | None = None
 
     @property
     def midpoints(self) -> np.ndarray:
@@ -55,6 +60,8 @@ class SuctionCandidates:
 
     def arrays(self) -> dict[str, np.ndarray]:
         extra = {"hold_margin": self.hold_margin.astype(np.float64)} if self.hold_margin is not None else {}
+        if self.hold_limit is not None:
+            extra["hold_limit"] = self.hold_limit.astype(np.int8)
         return {
             "contacts": self.contacts,
             "normals": self.normals,
@@ -87,8 +94,15 @@ def load_suction_candidates(path: str | os.PathLike[str] | IO[bytes]) -> Suction
     for key, shape in shapes.items():
         if data[key].shape != shape:
             raise InvalidCandidatesError(f"{key} must have shape {shape}, got {data[key].shape}", field=key)
-    if "hold_margin" in data and data["hold_margin"].shape != (n,):
-        raise InvalidCandidatesError(f"hold_margin must have shape {(n,)}", field="hold_margin")
+    for key in ("hold_margin", "hold_limit"):
+        if key in data and data[key].shape != (n,):
+            raise InvalidCandidatesError(f"{key} must have shape {(n,)}", field=key)
+    if "hold_limit" in data and (
+        "hold_margin" not in data or not np.isin(data["hold_limit"], range(len(LIMITS))).all()
+    ):
+        raise InvalidCandidatesError(
+            f"hold_limit must index {', '.join(LIMITS)} and come with hold_margin", field="hold_limit"
+        )
     return SuctionCandidates(
         contacts=data["contacts"].astype(np.float64),
         normals=data["normals"].astype(np.float64),
@@ -100,6 +114,7 @@ def load_suction_candidates(path: str | os.PathLike[str] | IO[bytes]) -> Suction
         labels=data.get("labels", np.full((n, 2), -1, dtype=np.int32)).astype(np.int32),
         medoids=data.get("medoids", np.zeros(0, dtype=np.int64)).astype(np.int64),
         hold_margin=data["hold_margin"].astype(np.float64) if "hold_margin" in data else None,
+        hold_limit=data["hold_limit"].astype(np.int8) if "hold_limit" in data else None,
     )
 
 

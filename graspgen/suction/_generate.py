@@ -4,16 +4,19 @@ approach along its inward normal (and, with max_tilt_deg, tilted approaches on a
 
 `generate_suction` is what graspgen.generate runs for a SuctionSpec; it reports the stages load, sample, pairs (the
 per-candidate criteria seal, tilt and hold), collision, cluster and export to the progress callback, as the jaws do.
+`recluster_suction` (what graspgen.recluster runs for a suction set) clusters a set's stored candidates again with new
+k1 / k2 / seed through the same clustering and export, reporting cluster and export.
 """
 
 from __future__ import annotations
 
+import copy
 import math
 import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 import trimesh
@@ -21,20 +24,28 @@ import trimesh
 from .. import clustering, sampling
 from ..collision import MeshTree, TriangleTree, build_tree, mesh_solid
 from ..coverage import coverage
-from ..errors import InvalidMeshError, InvalidParameterError, InvalidUnitsError
+from ..errors import InvalidCandidatesError, InvalidMeshError, InvalidParameterError, InvalidUnitsError
 from ..hold import hold_load, part_mass
 from ..params import Params, QualityOptions
 from ..parts import Part, load_part
 from ..quality import center_of_mass
 from ..transforms import approach_basis, choose_roll, roll_angles_rad, suction_frames
 from ._collision import CollisionRule, body_frame, collision_kernel
-from ._export import SuctionCandidates, SuctionGraspSet
+from ._export import SuctionCandidates, SuctionGraspSet, load_suction_candidates
 from ._hold import LIMITS, HoldRule, hold_kernel
 from ._model import SUCTION, SuctionModel, depth_limits, inner_probes, lip_points
 from ._seal import PASS, REASONS, SealPart, SealRule, seal_kernel
 from ._spec import MAX_VACUUM, SuctionSpec
 
-__all__ = ["generate_suction", "suction_candidates", "judge_cups", "check_params", "CupJudgement", "CRITERIA"]
+__all__ = [
+    "generate_suction",
+    "recluster_suction",
+    "suction_candidates",
+    "judge_cups",
+    "check_params",
+    "CupJudgement",
+    "CRITERIA",
+]
 
 #: the criteria in the order they run (and the keys of stats.rejected)
 CRITERIA = ("seal", "tilt", "hold", "collision")
@@ -187,9 +198,23 @@ def generate_suction(
         labels=np.full((len(s), 2), -1, dtype=np.int32),
         medoids=np.zeros(0, dtype=np.int64),
         hold_margin=s.margin,
+        hold_limit=s.limit,
     )
     stats = _stats(run, loaded, surface, sealed, held, s)
-    result = _cluster_and_export(cands, s, loaded, run, stats, started, (object_name, object_version))
+    part = loaded.part
+    obj = {
+        "name": object_name or part.name,
+        "version": object_version,
+        "sha256": part.sha256,
+        "source_units": part.source_units,
+    }
+    result = _cluster_and_export(
+        cands,
+        stats,
+        _Selection(obj, spec, params, run.mu, loaded.mass, list(part.warnings)),
+        report,
+        started,
+    )
     if recording is not None:
         from ._recording import record_suction_run
 
@@ -197,6 +222,83 @@ def generate_suction(
             recording, result, part=loaded.part, sample_points=surface.points, sample_normals=surface.normals
         )
     return result
+
+
+def recluster_suction(
+    candidates: str | os.PathLike[str] | IO[bytes] | SuctionCandidates,
+    previous_export: dict[str, Any],
+    *,
+    k1: int,
+    k2: int,
+    seed: int = Params.seed,
+    options: QualityOptions | None = None,
+    recording: Any = None,
+    progress: Progress | None = None,
+    gripper: SuctionSpec | None = None,
+) -> SuctionGraspSet:
+    """A new selection from a suction set's stored candidates (its NPZ, or SuctionCandidates) and its export
+    (`gripper.kind` "suction"), clustered with k1 / k2 / seed: the export a fresh generate_suction of the same part,
+    cup and parameters with these k1 / k2 / seed makes (but for stats.timings_s). `gripper`: the spec the set was
+    made with, required when it has a body mesh (the export names its file and digest, not its contents); its
+    to_dict() must be the export's `gripper`. `options` as generate's: validate and best-near-medoid selection are
+    refused (check_params)."""
+    report = progress or _noop
+    started = time.perf_counter()
+    cands = candidates if isinstance(candidates, SuctionCandidates) else load_suction_candidates(candidates)
+    if gripper is None:
+        spec = SuctionSpec.from_dict(previous_export["gripper"])
+    elif gripper.to_dict() == previous_export["gripper"]:
+        spec = gripper
+    else:
+        raise InvalidParameterError("gripper is not the spec the grasp set was made with", field="gripper")
+    old = dict(previous_export["params"])
+    mu = float(old.get("friction") or spec.friction)
+    # the export carries the mass the run resolved (given, or density x volume) beside the density it came from
+    mass = old.pop("mass_kg", None)
+    params = Params.from_dict({**old, "k1": k1, "k2": k2, "seed": seed, "friction": mu})
+    check_params(params, options or QualityOptions())
+    if len(cands.roll_angles_rad) != params.rolls:
+        raise InvalidParameterError("the candidates' roll count differs from the export's params.rolls", field="rolls")
+    prev = copy.deepcopy(previous_export.get("stats", {}))
+    if prev.get("candidates", len(cands)) != len(cands):
+        raise InvalidCandidatesError(
+            f"the candidates ({len(cands)}) are not the export's ({prev['candidates']}): not this set's NPZ"
+        )
+    # the export's stats in their order, but for what clustering makes again
+    stats = {k: v for k, v in prev.items() if k not in ("cluster_note", "coverage", "export_order")}
+    stats["timings_s"] = {}
+    cands = _with_hold_limits(cands, spec, stats.get("hold"))
+    obj = dict(previous_export["object"])
+    result = _cluster_and_export(cands, stats, _Selection(obj, spec, params, mu, mass, []), report, started)
+    if recording is not None:
+        from ._recording import record_suction_run
+
+        record_suction_run(recording, result, part=None, sample_points=None, sample_normals=None)
+    return result
+
+
+def _with_hold_limits(cands: SuctionCandidates, spec: SuctionSpec, hold: Any) -> SuctionCandidates:
+    """The candidates with their hold_limit: as stored, or (an NPZ written without it) the hold kernel run again on
+    the contacts and approaches with the cup and the load, friction and centre of mass the export's stats.hold
+    records (the same inputs, so the same limits and margins as the run's)."""
+    if cands.hold_margin is None or cands.hold_limit is not None:
+        return cands
+    try:
+        rule = HoldRule(
+            float(spec.cup_radius),
+            float(spec.vacuum_force),
+            float(hold["friction"]),
+            float(hold["load_n"]),
+            np.asarray(hold["center_of_mass"], dtype=np.float64).reshape(3),
+        )
+    except (KeyError, TypeError, ValueError):
+        raise InvalidCandidatesError(
+            "the candidates have hold margins but no hold_limit, and the export's stats.hold lacks the load to "
+            "compute them again",
+            field="hold_limit",
+        ) from None
+    held = hold_kernel(np.ascontiguousarray(cands.contacts[:, 0]), np.ascontiguousarray(cands.approach), rule)
+    return replace(cands, hold_limit=held.limit)
 
 
 # --------------------------------------------------------------------------------------------------------------------
@@ -472,18 +574,27 @@ def _collision_rule(
     return rule, body
 
 
+@dataclass(frozen=True)
+class _Selection:
+    """What a suction set's export carries beside its candidates and stats: the object, the cup, the run's parameters,
+    its friction coefficient and the part's mass (kg, None without one), and the run's warnings."""
+
+    obj: dict[str, Any]
+    spec: SuctionSpec
+    params: Params
+    mu: float
+    mass_kg: float | None
+    warnings: list[str]
+
+
 def _cluster_and_export(
-    cands: SuctionCandidates,
-    s: _Survivors,
-    loaded: _Loaded,
-    run: _Run,
-    stats: dict[str, Any],
-    started: float,
-    name_version: tuple[str | None, int | None],
+    cands: SuctionCandidates, stats: dict[str, Any], sel: _Selection, report: Progress, started: float
 ) -> SuctionGraspSet:
-    """Two-stage k-medoids (contacts, then signed approaches), the export's grasps best first within each
-    translation cluster (the larger hold margin, else the smaller seal strain, then the candidate index)."""
-    params, report = run.params, run.report
+    """Two-stage k-medoids (contacts, then signed approaches) with sel.params' k1, k2 and seed, the export's grasps
+    best first within each translation cluster (the larger hold margin, else the smaller seal strain, then the
+    candidate index). A function of the candidates alone: generate_suction and recluster_suction share it, so the
+    same candidates and k1 / k2 / seed give the same grasps."""
+    params = sel.params
     report("cluster", 0.0)
     t0 = time.perf_counter()
     res = clustering.two_stage(cands.midpoints, cands.approach, params.k1, params.k2, seed=params.seed, signed=True)
@@ -502,28 +613,25 @@ def _cluster_and_export(
     medoids, clusters, sizes = medoids[order], clusters[order], sizes[order]
     cands = replace(cands, labels=labels, medoids=medoids)
     stats["export_order"] = "hold_margin" if cands.hold_margin is not None else "seal_strain"
-    grasps = _grasps(cands, s, medoids, clusters, sizes)
+    grasps = _grasps(cands, medoids, clusters, sizes)
     stats["coverage"] = coverage(cands.midpoints, cands.approach, medoids).to_json()
     stats["timings_s"]["total"] = time.perf_counter() - started
     report("export", 1.0)
-    part = loaded.part
-    name, version = name_version
-    obj = {"name": name or part.name, "version": version, "sha256": part.sha256, "source_units": part.source_units}
     return SuctionGraspSet(
-        object=obj,
-        gripper=run.spec,
+        object=sel.obj,
+        gripper=sel.spec,
         params=params,
-        friction=run.mu,
+        friction=sel.mu,
         stats=stats,
         grasps=grasps,
         candidates=cands,
-        warnings=list(part.warnings),
-        mass_kg=loaded.mass,
+        warnings=sel.warnings,
+        mass_kg=sel.mass_kg,
     )
 
 
 def _grasps(
-    cands: SuctionCandidates, s: _Survivors, medoids: np.ndarray, clusters: np.ndarray, sizes: np.ndarray
+    cands: SuctionCandidates, medoids: np.ndarray, clusters: np.ndarray, sizes: np.ndarray
 ) -> list[dict[str, Any]]:
     """The exported grasps: pose at roll 0 when every roll is free (a round tool), else at the middle of the widest
     run of free rolls (graspgen.transforms.choose_roll)."""
@@ -547,9 +655,9 @@ def _grasps(
             "seal_strain": round(float(cands.seal_strain[m]), 9),
             "tilt_deg": round(float(cands.tilt_deg[m]), 9),
         }
-        if cands.hold_margin is not None and s.limit is not None:
+        if cands.hold_margin is not None and cands.hold_limit is not None:
             g["hold_margin"] = round(float(cands.hold_margin[m]), 6)
-            g["hold_limit"] = LIMITS[int(s.limit[m])]
+            g["hold_limit"] = LIMITS[int(cands.hold_limit[m])]
         out.append(g)
     return out
 

@@ -1,5 +1,6 @@
 """The `cluster` job kind: a stored grasp set's candidates clustered again with new k1 / k2 / seed (graspgen.recluster)
-into a new version of the same object and gripper pair."""
+into a new version of the same object and gripper pair; a parallel set's or a suction set's alike (the export's
+`gripper.kind` says which clustering runs)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,8 @@ from pydantic import ConfigDict, Field
 from sqlalchemy.orm import Session
 
 from graspgen.errors import InvalidParameterError
-from graspgen.params import Params, from_job
+from graspgen.kinds import check_params_for_kind
+from graspgen.params import Params, QualityOptions, from_job
 from services.api.schemas import ID_MAX, PARAMS_DOC, NoNulModel
 from services.common.grippers import file_digests, gripper_kind
 from services.common.models import GraspSet as GraspSetRow
@@ -21,6 +23,7 @@ from .params import QUALITY_PARAMS, split_quality
 
 if TYPE_CHECKING:
     from graspgen.export import GraspSet
+    from graspgen.suction import SuctionGraspSet
 
 __all__ = ["KIND", "ClusterJobRequest", "resolve", "run", "CLUSTER_PARAMS"]
 
@@ -39,7 +42,8 @@ class ClusterJobRequest(NoNulModel):
     params: Annotated[dict[str, Any] | None, PARAMS_DOC] = Field(
         None,
         description="k1, k2, seed; validate (bool), select ('medoid' | 'best-near-medoid'), density (kg/m^3); "
-        "docs/QUALITY.md. A cluster job does not inherit validate and select from its source set.",
+        "docs/QUALITY.md. A cluster job does not inherit validate and select from its source set. A suction set "
+        "takes k1, k2, seed only.",
         examples=[{"k1": 8, "k2": 2, "seed": 1, "validate": True}],
     )
 
@@ -64,20 +68,22 @@ def resolve(session: Session, body: ClusterJobRequest) -> dict[str, Any]:
     if source.candidates_key is None:
         raise ApiError(422, "no-candidates", f"grasp set {source.id} has no stored candidates", field="grasp_set")
     gv = session.get(GripperVersion, source.gripper_version_id)
-    if gv is not None and gripper_kind(gv.spec) != "parallel":
-        # graspgen.recluster reads a parallel gripper's candidates; a suction set is clustered by a new generate job
-        raise ApiError(
-            422,
-            "unsupported-gripper",
-            f"grasp set {source.id} is a {gripper_kind(gv.spec)} set: cluster jobs re-cluster parallel sets only; "
-            "submit a generate job with the new k1, k2, seed instead",
-            field="grasp_set",
+    kind = gripper_kind(gv.spec) if gv is not None else "parallel"
+    if kind != "parallel" and "density" in given:
+        # a suction set's candidates passed criterion hold with its mass; only validation (jaws) takes a new one
+        raise InvalidParameterError(
+            f"grasp set {source.id} is a {kind} set: its candidates were judged with its mass, and a cluster job "
+            "takes no density for it (a generate job with the new mass judges them again)",
+            field="density",
         )
     # quality options are the cluster job's own, not inherited from the source set
     base, _ = split_quality(source.params)
     if "density" in given:
         base.pop("mass_kg", None)  # a density for validation replaces the source's mass (one of the two)
-    merged = {**Params.from_dict({**base, **given}).to_dict(), **quality}
+    core = Params.from_dict({**base, **given})
+    # options the set's gripper kind cannot use (validate, select for a suction set): 422 now, not a failed job
+    check_params_for_kind(kind, core, QualityOptions.split_job(quality)[1])
+    merged = {**core.to_dict(), **quality}
     return {
         "object_version_id": source.object_version_id,
         "gripper_version_id": source.gripper_version_id,
@@ -87,7 +93,7 @@ def resolve(session: Session, body: ClusterJobRequest) -> dict[str, Any]:
 
 
 # -- the run (the worker) ---------------------------------------------------------------------------------------------
-def run(ctx: RunContext) -> GraspSet:
+def run(ctx: RunContext) -> GraspSet | SuctionGraspSet:
     import graspgen
 
     inp, p = ctx.inputs, ctx.inputs.params
@@ -95,6 +101,22 @@ def run(ctx: RunContext) -> GraspSet:
     npz = ctx.storage.download(inp.source_candidates_key, ctx.tmp / "source-candidates.npz")
     previous = json.loads(ctx.storage.get_bytes(inp.source_export_key))
     params, options = from_job(p)
+    # a spec with geometry: with its meshes (the export holds only their digests); a spec without: from the export
+    gripper = ctx.gripper() if file_digests(inp.spec) else None
+    if gripper_kind(inp.spec) != "parallel":
+        # a suction set: its NPZ and export alone (graspgen.recluster reads the kind from the export); the candidates
+        # passed criterion hold with the set's mass, and clustering needs no part
+        return graspgen.recluster(
+            str(npz),
+            previous,
+            gripper=gripper,
+            k1=params.k1,
+            k2=params.k2,
+            seed=params.seed,
+            recording=ctx.recording,
+            progress=ctx.progress,
+            options=options,
+        )
     part: dict[str, str] = {}
     if options.needs_part:
         # validation and quality scoring need the part; recluster loads it in metres from `units`
@@ -102,8 +124,7 @@ def run(ctx: RunContext) -> GraspSet:
     return graspgen.recluster(
         str(npz),
         previous,
-        # a spec with geometry: with its meshes (the export holds only their digests); a box spec: from the export
-        gripper=ctx.gripper() if file_digests(inp.spec) else None,
+        gripper=gripper,
         k1=params.k1,
         k2=params.k2,
         seed=params.seed,

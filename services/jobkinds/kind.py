@@ -15,6 +15,7 @@ from sqlalchemy.orm import Session
 
 if TYPE_CHECKING:
     from graspgen.export import GraspSet
+    from graspgen.suction import SuctionGraspSet
     from services.common.storage import Storage
 
 __all__ = ["JobKind", "ContainerKind", "JobInputs", "RunContext", "Resolve", "Run"]
@@ -23,7 +24,7 @@ __all__ = ["JobKind", "ContainerKind", "JobInputs", "RunContext", "Resolve", "Ru
 #: source_grasp_set_id, params); raises services.api.problems.ApiError or a GraspgenError (both 422 problems)
 Resolve = Callable[[Session, Any], dict[str, Any]]
 #: the claimed job's inputs -> graspgen's result; raises GraspgenError for bad input, Cancelled when cancelled
-Run = Callable[["RunContext"], "GraspSet"]
+Run = Callable[["RunContext"], "GraspSet | SuctionGraspSet"]
 
 
 @dataclass(frozen=True)

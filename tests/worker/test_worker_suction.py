@@ -1,7 +1,7 @@
 """Suction jobs through the service (CONTRACT.md "Suction cups"): a generate job with a cup runs in the worker and its
 set is served like any other (export, grasp rows, candidate NPZ, recording, preview, catalogue, release, pick, bulk);
 a cup on a body mesh is rebuilt with its file; params a kind cannot use are refused at submission, as graspgen refuses
-them at run time; a cluster job on a suction set is refused."""
+them at run time; a cluster job reclusters a suction set's stored candidates into a new version."""
 
 from __future__ import annotations
 
@@ -110,6 +110,9 @@ def test_a_cup_with_a_body_mesh_runs_with_its_file(pg_service, runner):
     assert "any_roll" not in pick.json()["grasps"][0]  # a body turns with the roll
     png = pg_service.get(f"/v1/grasp-sets/{job['grasp_set']}/preview.png?size=320x240")
     assert png.status_code == 200, png.text
+    # a cluster job rebuilds the cup with its body file too (the export holds only its digest)
+    again = run_job(pg_service, runner, {"kind": "cluster", "grasp_set": job["grasp_set"], "params": {"k1": 2}})
+    assert pg_service.get(f"/v1/grasp-sets/{again['grasp_set']}").json()["gripper"] == r.json()["spec"]
 
 
 def test_bulk_jobs_mix_cups_and_jaws(pg_service, runner):
@@ -166,12 +169,39 @@ def test_graspgen_refuses_the_same_params(which, params, field):
     assert e.value.field == field
 
 
-def test_a_cluster_job_on_a_suction_set_is_refused(pg_service, runner):
+def test_a_cluster_job_reclusters_a_suction_set_into_a_new_version(pg_service, runner):
+    """The worker reclusters the stored NPZ (graspgen.recluster, the export's gripper.kind "suction"): the new version
+    holds what graspgen.recluster makes of the same NPZ and export, and the catalogue serves it as the pair's newest."""
     obj, cup = slug("plate"), slug("cup")
     assert pg_service.upload(obj, PART).status_code == 201
     assert pg_service.post("/v1/grippers", json={**CUP, "name": cup}).status_code == 201
-    job = run_job(pg_service, runner, {"object": obj, "gripper": cup, "params": {"points": 600, "k1": 2, "k2": 1}})
+    src = run_job(pg_service, runner, {"object": obj, "gripper": cup, "params": SMALL})["grasp_set"]
+    job = run_job(pg_service, runner, {"kind": "cluster", "grasp_set": src, "params": {"k1": 3, "k2": 1, "seed": 2}})
+    assert job["kind"] == "cluster" and job["source_grasp_set"] == src and job["grasp_set"] != src
+    gs = job["grasp_set"]
+    summary = next(i for i in pg_service.get(f"/v1/grasp-sets?object={obj}").json()["items"] if i["id"] == gs)
+    assert summary["derived_from"] == src and summary["version"] == 2
+    export = pg_service.get(f"/v1/grasp-sets/{gs}").json()
+    source = pg_service.get(f"/v1/grasp-sets/{src}").json()
+    assert export["gripper"] == source["gripper"] and export["gripper"]["kind"] == "suction"
+    assert export["params"] == {**source["params"], "k1": 3, "k2": 1, "seed": 2}  # the mass kept, nothing added
+    assert export["grasps"] and all(g["hold_margin"] >= 1 and g["hold_limit"] for g in export["grasps"])
+    # the same as graspgen.recluster of the source's NPZ and export
+    npz = pg_service.get(f"/v1/grasp-sets/{src}/candidates").content
+    local = graspgen.recluster(load_suction_candidates(io.BytesIO(npz)), source, k1=3, k2=1, seed=2)
+    assert export["grasps"] == json.loads(json.dumps(local.grasps))
+    cands = load_suction_candidates(io.BytesIO(pg_service.get(f"/v1/grasp-sets/{gs}/candidates").content))
+    assert np.array_equal(cands.medoids, local.candidates.medoids) and cands.hold_limit is not None
+    rows = pg_service.get(f"/v1/grasp-sets/{gs}/grasps?limit=100").json()["items"]
+    assert len(rows) == len(export["grasps"]) and rows[0]["width"] is None
+    assert pg_service.get(f"/v1/grasp-sets/{gs}/recording").status_code == 200
+    # the catalogue serves the newest set of the pair: the new version
+    assert pg_service.get(f"/v1/catalogue/{obj}/{cup}").headers["graspgen-set-id"] == str(gs)
+    # what a cup's clustering cannot use: 422 at submission with the field named, nothing stored
     before = pg_service.row_counts()
-    r = pg_service.post("/v1/jobs", json={"kind": "cluster", "grasp_set": job["grasp_set"], "params": {"k1": 3}})
-    assert r.status_code == 422 and r.json()["code"] == "unsupported-gripper" and r.json()["field"] == "grasp_set"
+    for params, field in (({"validate": True}, "validate"), ({"select": "best-near-medoid"}, "select")):
+        r = pg_service.post("/v1/jobs", json={"kind": "cluster", "grasp_set": src, "params": {"k1": 2, **params}})
+        assert r.status_code == 422 and r.json()["field"] == field, r.text
+    r = pg_service.post("/v1/jobs", json={"kind": "cluster", "grasp_set": src, "params": {"density": 1000}})
+    assert r.status_code == 422 and r.json()["field"] == "density", r.text
     assert pg_service.row_counts() == before
