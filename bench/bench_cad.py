@@ -7,8 +7,9 @@ Grippers: the box gripper (examples/pgn-80.json with a grip force of 20 N), the 
 (examples/pgn-80-vgroove.json) and the same V-groove with its finger subdivided to about 24,000 triangles (written to
 a temporary folder). Each run is its own process, warm (a small job first, so numba's compiled code is loaded), with
 mass 0.2 kg and the position tolerance on. Prints a Markdown table: (a)-(e) = pairs + collision (point test and
-mesh-exact check) + hold, medians over the runs, the ratio to the box gripper on the same part, the candidates and the
-process's peak resident memory. The gripper's meshes are loaded and prepared in the measured run.
+mesh-exact check) + hold, medians over the runs, the ratio to the box gripper on the same part, the candidates, the
+time to seat the grasps to export and judge them on their seats (graspgen.seating; CAD grippers only), the grasps
+exported and the process's peak resident memory. The gripper's meshes are loaded and prepared in the measured run.
 """
 
 from __future__ import annotations
@@ -71,6 +72,7 @@ def _child(spec: dict) -> dict:
         "wall": wall,
         "timings": st["timings_s"],
         "candidates": st["candidates"],
+        "grasps": len(gs.grasps),
         "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
     }
 
@@ -101,9 +103,9 @@ def main() -> None:
         print(f"points {args.points}, mass 0.2 kg, grip force 20 N, median of {args.repeat} processes; seconds\n")
         print(
             "| part | gripper | (a)-(e) s | x boxes | pairs | collision | of it mesh-exact | hold | candidates "
-            "| peak MB |"
+            "| seat s | grasps | peak MB |"
         )
-        print("|---|---|---|---|---|---|---|---|---|---|")
+        print("|---|---|---|---|---|---|---|---|---|---|---|---|")
         for part in parts:
             base = None
             for label, path in grippers.items():
@@ -120,7 +122,7 @@ def main() -> None:
                 print(
                     f"| {part['label']} | {label} | {core:.2f} | {core / base:.2f} | {med('pairs'):.3f} | "
                     f"{med('collision'):.3f} | {med('collision_mesh'):.3f} | {med('hold'):.3f} | "
-                    f"{runs[0]['candidates']:,} | {peak:.0f} |"
+                    f"{runs[0]['candidates']:,} | {med('seat'):.2f} | {runs[0]['grasps']} | {peak:.0f} |"
                 )
 
 
