@@ -86,7 +86,9 @@ def _first_contact(
     end of its travel, move along +X (the finger closes along -X) by up to dmax. Every vertex-face and edge-edge
     meeting with the finger's triangles (the TriangleTree `solid`) within that travel is found; those at a distance
     t <= limit go into out_t, out_p (the point on the part, finger frame before the move) and out_n (the part's
-    outward normal there), as many as fit. Returns (the smallest t, inf for none; how many were written)."""
+    outward normal there), as many as fit (none with limit < 0). Returns (the smallest t, inf for none; how many
+    were written). The walk for a part triangle covers its box moved by min(dmax, the smallest t so far) when
+    limit < 0, by min(dmax, limit) otherwise: exactly the features that can matter."""
     nodes, children, B_all = solid.nodes, solid.children, solid.triangles
     count = 0
     tmin = np.inf
@@ -95,7 +97,10 @@ def _first_contact(
     for a in range(A_all.shape[0]):
         A = A_all[a]
         lo0 = min(A[0, 0], A[1, 0], A[2, 0])
-        hi0 = max(A[0, 0], A[1, 0], A[2, 0]) + dmax
+        # a feature at t lies within the triangle's box moved by t: only t up to the smallest found so far (the
+        # first contact) or up to `limit` (the contacts written) can matter, so the walk's box shrinks with them
+        reach = min(dmax, tmin) if limit < 0.0 else min(dmax, limit)
+        hi0 = max(A[0, 0], A[1, 0], A[2, 0]) + reach
         lo1, hi1 = min(A[0, 1], A[1, 1], A[2, 1]), max(A[0, 1], A[1, 1], A[2, 1])
         lo2, hi2 = min(A[0, 2], A[1, 2], A[2, 2]), max(A[0, 2], A[1, 2], A[2, 2])
         stack[0] = 0
@@ -219,7 +224,9 @@ def seat_fingers(
         out_p = np.zeros((_MAX_FEATURES, 3))
         out_n = np.zeros((_MAX_FEATURES, 3))
         An, Nn, rec = np.ascontiguousarray(A[near]), np.ascontiguousarray(NA[near]), solid.record()
-        first, _ = _first_contact(An, Nn, rec, s0, -1.0, out_t, out_p, out_n)
+        # the first contact with the triangles nearest the finger first: the smallest t so far bounds the walk
+        nearest = np.argsort(-An[:, :, 0].max(axis=1), kind="stable")
+        first, _ = _first_contact(An[nearest], Nn[nearest], rec, s0, -1.0, out_t, out_p, out_n)
         if not np.isfinite(first):
             return None
         first = float(first)
