@@ -3,7 +3,7 @@ well does the `hold` criterion predict the simulation?
 
     .venv/bin/python bench/bench_suction_hold.py [--cup examples/cup-30.json] [--points 3000] [--k1 8] [--k2 2]
                                                  [--mass 0.2] [--sample 40] [--workers 2] [--parts NAME ...]
-                                                 [--json rows.json] [--render rows.json] [--out docs/benchmarks_quality.md]
+                                                 [--json rows.json] [--render rows.json] [--out FILE.md]
 
 Parts: every mesh in ../shared/meshes (units from its units.json; bad/ left out) and ../shared/meshes/paper. Cup:
 the contract's cup-30 (30 mm lip, 60 kPa, friction 0.5, 10 % stretch); every part weighs `--mass` (0.2 kg).
