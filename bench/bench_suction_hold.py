@@ -191,7 +191,7 @@ def markdown(rows, members, args, wall) -> str:
         f"`{args.command or ' '.join(['.venv/bin/python', *sys.argv])}` at {commit.strip()}; cup-30 (30 mm lip, "
         f"60 kPa: 42.4 N, friction 0.5), {args.mass:g} kg, {args.points} points, k = {args.k1} x {args.k2}, seed 0; "
         f"{platform.machine()}, {os.cpu_count()} cores, {wall:.0f} s. Judge: `graspgen/physics_suction.py` "
-        "(docs/HOLD.md, \"Suction: physics validation\"), nominal and the 12 members of "
+        '(docs/HOLD.md, "Suction: physics validation"), nominal and the 12 members of '
         "`suction_perturbation_set(0)`; held = held in all 13.",
         "",
     ]
