@@ -26,6 +26,7 @@ The markdown goes between the `bench_suction_hold` markers of `--out` (appended 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import platform
@@ -105,9 +106,16 @@ def frames(contacts: np.ndarray, approaches: np.ndarray) -> np.ndarray:
     return T
 
 
+def constants(args) -> ps.SuctionSimConstants:
+    """The judge's constants: the defaults, or the lip stiffness and gap limit given (a sensitivity run)."""
+    return dataclasses.replace(ps.SUCTION_SIM, lip_stiffness=args.lip_stiffness, gap_limit=args.gap_limit)
+
+
 def simulate(part, poses, cup, args, members, keys=None):
     sim_part = ps.prepare_suction_part(part.mesh, mass_kg=args.mass)
-    return ps.simulate_suction(sim_part, poses, cup, perturbations=members, workers=args.workers, keys=keys)
+    return ps.simulate_suction(
+        sim_part, poses, cup, perturbations=members, workers=args.workers, keys=keys, constants=constants(args)
+    )
 
 
 def failures(grid) -> dict[str, int]:
@@ -192,7 +200,12 @@ def markdown(rows, members, args, wall) -> str:
         f"60 kPa: 42.4 N, friction 0.5), {args.mass:g} kg, {args.points} points, k = {args.k1} x {args.k2}, seed 0; "
         f"{platform.machine()}, {os.cpu_count()} cores, {wall:.0f} s. Judge: `graspgen/physics_suction.py` "
         '(docs/HOLD.md, "Suction: physics validation"), nominal and the 12 members of '
-        "`suction_perturbation_set(0)`; held = held in all 13.",
+        "`suction_perturbation_set(0)`; held = held in all 13."
+        + (
+            ""
+            if constants(args) == ps.SUCTION_SIM
+            else f" Judge's lip stiffness {args.lip_stiffness:g} N/m per m, gap limit {args.gap_limit * 1e3:g} mm."
+        ),
         "",
     ]
     if source != "export":
@@ -259,6 +272,8 @@ def main() -> None:
     ap.add_argument("--sample", type=int, default=40)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--parts", nargs="*")
+    ap.add_argument("--lip-stiffness", type=float, default=ps.SUCTION_SIM.lip_stiffness, help="N/m per m of lip")
+    ap.add_argument("--gap-limit", type=float, default=ps.SUCTION_SIM.gap_limit, help="m")
     ap.add_argument("--json", help="also write the raw rows here")
     ap.add_argument("--render", help="only write the markdown of the rows (--json) of an earlier run")
     ap.add_argument("--wall", type=float, default=None)
