@@ -27,6 +27,7 @@ if TYPE_CHECKING:
     from collections.abc import Callable, Mapping
 
     from .export import GraspSet
+    from .suction import SuctionGraspSet
 
 __all__ = ["main", "DEMO_GRIPPER"]
 
@@ -283,11 +284,14 @@ def _warmup(args: argparse.Namespace) -> int:
 
 def _generate(args: argparse.Namespace) -> int:
     from . import pipeline
-    from .gripper import GripperSpec
+    from .kinds import load_gripper
+    from .suction import SuctionSpec
     from .units import extents_under_each_unit
 
-    spec = GripperSpec.load(args.gripper)
+    spec = load_gripper(args.gripper)  # a parallel gripper or a suction cup, by its kind
     params, options = _run_params(args)  # checked before any heavy work
+    if isinstance(spec, SuctionSpec) and args.preview:
+        raise GraspgenError("--preview does not draw suction cups yet: leave it out", field="preview")
     if args.units is None:
         from .parts import read_raw_extents
 
@@ -347,7 +351,7 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _run_and_write(
-    run: Callable[[Path | None, _ProgressBar], GraspSet],
+    run: Callable[[Path | None, _ProgressBar], GraspSet | SuctionGraspSet],
     outputs: Mapping[str, Path | None],
     *,
     quiet: bool,
@@ -372,6 +376,9 @@ def _run_and_write(
             result.save_candidates(temps["candidates"])
         if "preview" in temps:
             assert preview is not None  # a preview output comes with its function
+            from .suction import SuctionGraspSet
+
+            assert not isinstance(result, SuctionGraspSet)  # _generate refuses a preview of suction cups
             temps["preview"].write_bytes(preview(result))
         for key, tmp in temps.items():
             os.replace(tmp, cast(Path, outputs[key]))  # temps holds only the outputs that were given
@@ -417,7 +424,11 @@ class _ProgressBar:
             self.open = False
 
 
-def _summary(result: GraspSet) -> str:
+def _summary(result: GraspSet | SuctionGraspSet) -> str:
+    from .suction import SuctionGraspSet
+
+    if isinstance(result, SuctionGraspSet):
+        return _suction_summary(result)
     s = result.stats
     rej = s["rejected"]
     t = s["timings_s"]
@@ -435,6 +446,23 @@ def _summary(result: GraspSet) -> str:
         ("grasps", f"{len(result.grasps)}"),
         *_quality_rows(s),
         ("time", " ".join(f"{k} {v:.2f}s" for k, v in t.items())),
+    ]
+    w = max(len(k) for k, _ in rows)
+    return "\n".join(f"{k:<{w}}  {v}" for k, v in rows)
+
+
+def _suction_summary(result: SuctionGraspSet) -> str:
+    s = result.stats
+    rows = [
+        ("object", f"{result.object['name']} ({result.object['source_units']})"),
+        ("gripper", f"{result.gripper.name} (suction, cup {2 * result.gripper.cup_radius * 1e3:.4g} mm)"),
+        ("points", f"{s['points']} (mean spacing {s.get('spacing_mean', 0) * 1e3:.2f} mm)"),
+        ("approaches", f"{s['candidates_total']:,}"),
+        *((f"rejected: {k}", f"{v:,}" if k != "hold" or "hold" in s else "off") for k, v in s["rejected"].items()),
+        ("candidates", f"{s['candidates']:,}"),
+        ("grasps", f"{len(result.grasps)}"),
+        *_quality_rows(s),
+        ("time", " ".join(f"{k} {v:.2f}s" for k, v in s["timings_s"].items())),
     ]
     w = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{w}}  {v}" for k, v in rows)

@@ -16,7 +16,9 @@ cluster by its closing axes (k2 clusters) with the sign-invariant angle
 
     d(a, b) = arccos |a . b|   in radians, 0 .. pi/2,
 
-so a closing axis and its reverse (the same jaw pair, contacts swapped) are the same direction. Near 0 it is
+so a closing axis and its reverse (the same jaw pair, contacts swapped) are the same direction. A suction cup's
+approach and its reverse are different grasps: `two_stage(..., signed=True)` (metric "direction") uses the signed
+angle arccos(a . b), 0 .. pi, evaluated near 0 and pi from the chord as well. Near 0 it is
 evaluated as 2 arcsin(|a - s b| / 2) with s = sign(a . b), exact where arccos loses half its digits. The angle is a
 metric (the triangle inequality holds), unlike 1 - |a . b|, and it grows linearly with the deviation like the
 Euclidean midpoint distance, so both stages minimise the same kind of loss (1 - |a . b| ~ angle^2 / 2 would weight
@@ -73,9 +75,11 @@ _SAMPLE_CAP = 10_000
 _MAX_MATRIX = 20_000
 
 #: metric name -> kernel code
-METRICS: dict[str, int] = {"euclidean": 0, "axis": 1}
+METRICS: dict[str, int] = {"euclidean": 0, "axis": 1, "direction": 2}
 _EUCLIDEAN = 0
 _AXIS = 1
+#: the signed angle arccos(a . b), 0 .. pi: a suction cup's approach and its reverse are different grasps
+_DIRECTION = 2
 
 #: axes shorter than this cannot be normalised
 _MIN_AXIS_NORM = 1e-9
@@ -153,6 +157,8 @@ def _dist(X: np.ndarray, i: int, Y: np.ndarray, j: int, metric: int) -> float:
         euclidean: float = np.sqrt(s)
         return euclidean
     dot = _dot(X, i, Y, j)
+    if metric == _DIRECTION:
+        return _direction_angle(X, i, Y, j, dot)
     ac = abs(dot)
     if ac < _ACOS_SAFE:
         angle: float = np.arccos(ac)
@@ -165,6 +171,21 @@ def _dist(X: np.ndarray, i: int, Y: np.ndarray, j: int, metric: int) -> float:
         dm += t * t
     chord_angle: float = 2.0 * np.arcsin(min(0.5 * np.sqrt(dm), 1.0))
     return chord_angle
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _direction_angle(X: np.ndarray, i: int, Y: np.ndarray, j: int, dot: float) -> float:
+    """arccos(a . b) of unit rows a = X[i], b = Y[j]; near 0 and pi from the chord |a -+ b| (exact there)."""
+    if abs(dot) < _ACOS_SAFE:
+        angle: float = np.arccos(dot)
+        return angle
+    sg = 1.0 if dot >= 0.0 else -1.0
+    dm = 0.0
+    for c in range(X.shape[1]):
+        t = X[i, c] - sg * Y[j, c]
+        dm += t * t
+    near: float = 2.0 * np.arcsin(min(0.5 * np.sqrt(dm), 1.0))
+    return near if dot >= 0.0 else math.pi - near
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -574,7 +595,7 @@ def dissimilarities(X: np.ndarray, *, metric: str = "euclidean") -> np.ndarray:
     """(n, n) float64 matrix of the module's distances between the rows of X (n, d); "axis" normalises the rows."""
     code = _metric_code(metric)
     A = _check_points("X", X)
-    if code == _AXIS:
+    if code != _EUCLIDEAN:
         A = _unit_rows("X", A)
     return _pairwise(A, code)
 
@@ -653,7 +674,7 @@ def kmedoids(
     sample_size = _default_sample_size(k) if sample_size is None else sample_size
     sample_size = _check_int("sample_size", sample_size, k + 1, _MAX_MATRIX)
     A = _check_points("X", X)
-    if code == _AXIS:
+    if code != _EUCLIDEAN:
         A = _unit_rows("X", A)
     return _kmedoids(A, k, code, seed, exact_limit, draws, sample_size, max_iter, threads=True)
 
@@ -713,9 +734,12 @@ def _sub_seed(seed: int, *path: int) -> int:
     return int(np.random.SeedSequence([seed, *path]).generate_state(1)[0])
 
 
-def two_stage(midpoints: np.ndarray, axes: np.ndarray, k1: int, k2: int, *, seed: int = 0) -> TwoStageResult:
+def two_stage(
+    midpoints: np.ndarray, axes: np.ndarray, k1: int, k2: int, *, seed: int = 0, signed: bool = False
+) -> TwoStageResult:
     """Two-stage k-medoids of grasp candidates: k1 clusters of the midpoints (n, 3) float64 metres (Euclidean), then
     k2 clusters of the closing axes (n, 3) (normalised here; sign-invariant angle) within each translation cluster.
+    `signed`: the axes are directions (a suction cup's approaches), compared by the signed angle arccos(a . b).
 
     A translation cluster with at most k2 members keeps each member as its own medoid. With fewer than k1 * k2
     candidates every candidate is returned as its own medoid: translation clusters as usual (min(k1, n) of them),
@@ -760,7 +784,7 @@ def two_stage(midpoints: np.ndarray, axes: np.ndarray, k1: int, k2: int, *, seed
         return _kmedoids(
             U[groups[t]],
             k2,
-            _AXIS,
+            _DIRECTION if signed else _AXIS,
             _sub_seed(seed, 2, t),
             STAGE_TWO_EXACT_LIMIT,
             DRAWS,

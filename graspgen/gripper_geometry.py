@@ -39,7 +39,10 @@ from .units import UNIT_SCALE
 
 __all__ = [
     "GripperGeometry",
+    "BodyGeometry",
     "load_geometry",
+    "load_body",
+    "BODY_GEOMETRY_KEYS",
     "finger_pose",
     "GEOMETRY_KEYS",
     "MESH_ROLES",
@@ -153,6 +156,80 @@ class GripperGeometry:
         return hash(self._key())
 
 
+#: the keys of a tool's `geometry` (a suction cup's tool: the body behind the cup, graspgen.suction)
+BODY_GEOMETRY_KEYS = ("units", "body", "sha256")
+
+
+@dataclass(frozen=True, eq=False)
+class BodyGeometry:
+    """One body mesh from CAD in the grasp frame, metres, immutable: a suction tool's everything behind the cup.
+    Equal when units, file name and digest are equal.
+
+    - `body`: a new trimesh.Trimesh over the same read-only arrays at each access.
+    - `files`: {"body": file name as the spec names it}; `sha256`: file name -> hex sha256 of its bytes.
+    """
+
+    units: str
+    files: Mapping[str, str]
+    sha256: Mapping[str, str]
+    _mesh: _Mesh = field(repr=False)
+
+    @property
+    def body(self) -> trimesh.Trimesh:
+        return self._mesh.trimesh()
+
+    @property
+    def vertices(self) -> np.ndarray:
+        """(n, 3) float64, metres, read-only."""
+        return self._mesh.vertices
+
+    @property
+    def faces(self) -> np.ndarray:
+        """(m, 3) int64, outward winding, read-only."""
+        return self._mesh.faces
+
+    def to_dict(self) -> dict[str, Any]:
+        """The spec's `geometry` as given (units lower-case), with `sha256` {file name: hex}."""
+        name = self.files["body"]
+        return {"units": self.units, "body": name, "sha256": {name: self.sha256[name]}}
+
+    def _key(self) -> tuple[object, ...]:
+        return (self.units, tuple(sorted(self.files.items())), tuple(sorted(self.sha256.items())))
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, BodyGeometry) and self._key() == other._key()
+
+    def __hash__(self) -> int:
+        return hash(self._key())
+
+
+def load_body(
+    data: Any,
+    *,
+    files: Mapping[str, bytes] | None = None,
+    base_dir: str | Path | None = None,
+    max_decoded_bytes: int | None = None,
+) -> BodyGeometry:
+    """Read and check a `geometry` of one body mesh ({"units", "body", optional "sha256"}): the same file rules and
+    mesh checks as a parallel gripper's (module docstring). The file comes as bytes by name (`files`, exactly that
+    name) or is read relative to `base_dir`."""
+    if not isinstance(data, dict):
+        raise InvalidGripperError("geometry must be a JSON object", field="geometry")
+    unknown = sorted(set(data) - set(BODY_GEOMETRY_KEYS))
+    if unknown:
+        raise InvalidGripperError(
+            "geometry has unknown fields " + ", ".join(unknown) + " (it takes " + ", ".join(BODY_GEOMETRY_KEYS) + ")",
+            field=f"geometry.{unknown[0]}",
+        )
+    units = _units(data)
+    if "body" not in data:
+        raise InvalidGripperError("geometry lacks body (the tool's mesh file)", field="geometry.body")
+    roles = {"body": check_file_name(data["body"], "geometry.body")}
+    loaded = _read_solids(data, roles, files, base_dir, units, max_decoded_bytes)
+    mesh, digest = loaded[roles["body"]]
+    return BodyGeometry(units=units, files=roles, sha256={roles["body"]: digest}, _mesh=_Mesh.of(mesh))
+
+
 def finger_pose(width: float, side: int) -> np.ndarray:
     """T_grasp_finger (4, 4): the finger frame of the +X (`side` +1) or -X (`side` -1) finger at closing width
     `width` (m): at (side * width / 2, 0, 0), the -X finger's turned 180 deg about Z."""
@@ -208,47 +285,12 @@ def load_geometry(
             "geometry has unknown fields " + ", ".join(unknown) + " (it takes " + ", ".join(GEOMETRY_KEYS) + ")",
             field=f"geometry.{unknown[0]}",
         )
-    units = data.get("units")
-    if not isinstance(units, str) or units.strip().lower() not in UNIT_SCALE:
-        raise InvalidGripperError(
-            f"geometry.units must be one of {', '.join(UNIT_SCALE)} (the unit of the mesh files), got {units!r}",
-            field="geometry.units",
-        )
-    units = units.strip().lower()
+    units = _units(data)
     if "finger" not in data:
         raise InvalidGripperError("geometry lacks finger (the +X finger's mesh file)", field="geometry.finger")
     roles = {r: check_file_name(data[r], f"geometry.{r}") for r in MESH_ROLES if r in data}
     pad = _pad(data.get("pad")) if "pad" in data else None
-    names = list(dict.fromkeys(roles.values()))
-    given_sha = _given_sha256(data["sha256"], names) if "sha256" in data else None
-    blobs = _file_bytes(roles, names, files, base_dir)
-
-    loaded: dict[str, tuple[trimesh.Trimesh, str]] = {}
-    for name in names:
-        role = next(r for r in MESH_ROLES if roles.get(r) == name)
-        what = "a gripper body" if role == "body" else "a gripper finger"
-        try:
-            loaded[name] = load_solid(
-                blobs[name],
-                units=units,
-                file_type=name.rsplit(".", 1)[-1],
-                label=f"{role} file {name!r}",
-                what=what,
-                max_triangles=MAX_TRIANGLES,
-                extent_range=(MIN_LENGTH, MAX_LENGTH),
-                **({"max_decoded_bytes": max_decoded_bytes} if max_decoded_bytes else {}),
-            )
-        except GraspgenError as exc:
-            raise InvalidGripperError(exc.message, field=f"geometry.{role}") from None
-    sha = {name: digest for name, (_, digest) in loaded.items()}
-    if given_sha is not None:
-        for name in names:
-            if given_sha[name] != sha[name]:
-                raise InvalidGripperError(
-                    f"geometry.sha256 gives {given_sha[name][:12]}... for {name!r} but the file's sha256 is "
-                    f"{sha[name][:12]}...: the file is not the one the spec was made with",
-                    field="geometry.sha256",
-                )
+    loaded = _read_solids(data, roles, files, base_dir, units, max_decoded_bytes)
 
     finger = loaded[roles["finger"]][0]
     left = loaded[roles.get("finger_left", roles["finger"])][0]
@@ -274,12 +316,65 @@ def load_geometry(
     return GripperGeometry(
         units=units,
         files=dict(roles),
-        sha256=sha,
+        sha256={name: digest for name, (_, digest) in loaded.items()},
         pad_width=float(pad_w),
         pad_depth=float(pad_d),
         pad_given=pad,
         _meshes=meshes,
     )
+
+
+def _units(data: dict[str, Any]) -> str:
+    """The geometry's `units`, lower-case, or the error naming the accepted ones."""
+    units = data.get("units")
+    if not isinstance(units, str) or units.strip().lower() not in UNIT_SCALE:
+        raise InvalidGripperError(
+            f"geometry.units must be one of {', '.join(UNIT_SCALE)} (the unit of the mesh files), got {units!r}",
+            field="geometry.units",
+        )
+    return units.strip().lower()
+
+
+def _read_solids(
+    data: dict[str, Any],
+    roles: dict[str, str],
+    files: Mapping[str, bytes] | None,
+    base_dir: str | Path | None,
+    units: str,
+    max_decoded_bytes: int | None,
+) -> dict[str, tuple[trimesh.Trimesh, str]]:
+    """file name -> (its closed mesh in metres, its sha256) for the files `roles` names (role -> file name), read
+    from `files` or beside `base_dir` and checked (load_solid), their digests against a given `data["sha256"]`."""
+    names = list(dict.fromkeys(roles.values()))
+    given_sha = _given_sha256(data["sha256"], names) if "sha256" in data else None
+    blobs = _file_bytes(roles, names, files, base_dir)
+    loaded: dict[str, tuple[trimesh.Trimesh, str]] = {}
+    for name in names:
+        role = next(r for r in MESH_ROLES if roles.get(r) == name)
+        what = "a gripper body" if role == "body" else "a gripper finger"
+        try:
+            loaded[name] = load_solid(
+                blobs[name],
+                units=units,
+                file_type=name.rsplit(".", 1)[-1],
+                label=f"{role} file {name!r}",
+                what=what,
+                max_triangles=MAX_TRIANGLES,
+                extent_range=(MIN_LENGTH, MAX_LENGTH),
+                **({"max_decoded_bytes": max_decoded_bytes} if max_decoded_bytes else {}),
+            )
+        except GraspgenError as exc:
+            raise InvalidGripperError(exc.message, field=f"geometry.{role}") from None
+    if given_sha is not None:
+        for name in names:
+            digest = loaded[name][1]
+            if given_sha[name] != digest:
+                raise InvalidGripperError(
+                    f"geometry.sha256 gives {given_sha[name][:12]}... for {name!r} but the file's sha256 is "
+                    f"{digest[:12]}...: the file is not the one the spec was made with",
+                    field="geometry.sha256",
+                )
+    return loaded
 
 
 def _pad(value: Any) -> tuple[float, float]:

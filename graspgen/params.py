@@ -177,6 +177,13 @@ class Params:
     position_tolerance: float = _option(
         1.0e-3, "criterion (c) holds for every surface normal within this distance of a contact, m", ge=0, le=0.05
     )
+    # suction cups only (CONTRACT.md "Suction cups"): None keeps the approaches along the surface normals
+    max_tilt_deg: float | None = _option(
+        None,
+        "suction cups: also approaches tilted up to this angle from the surface normal, deg (criterion tilt)",
+        ge=0,
+        le=45,
+    )
 
     def __post_init__(self) -> None:
         _check_options(self)
@@ -192,8 +199,11 @@ class Params:
 
     def to_dict(self, *, friction: float | None = None, mass_kg: float | None = None) -> dict[str, Any]:
         """The parameters as exported; `friction` and `mass_kg`: the values the run resolved (the gripper's
-        coefficient, density x volume)."""
+        coefficient, density x volume). `max_tilt_deg` only when given (a parallel gripper's export stays as it was
+        before suction cups)."""
         d = asdict(self)
+        if d["max_tilt_deg"] is None:
+            del d["max_tilt_deg"]
         if friction is not None:
             d["friction"] = friction
         if mass_kg is not None:

@@ -8,7 +8,7 @@ import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, overload
 
 import numpy as np
 import trimesh
@@ -20,9 +20,11 @@ from .coverage import coverage
 from .errors import InvalidMeshError, InvalidParameterError, InvalidUnitsError
 from .export import Candidates, GraspSet
 from .gripper import GripperSpec
+from .kinds import gripper_from_dict
 from .params import TOLERANCES, Params, QualityOptions, from_keywords, keyword_parameters
 from .parts import Part, load_part
-from .transforms import grasp_frames, roll_angles_rad
+from .suction import SuctionGraspSet, SuctionSpec, generate_suction
+from .transforms import choose_roll, grasp_frames, roll_angles_rad
 
 if TYPE_CHECKING:
     from .physics import SimResult
@@ -59,9 +61,10 @@ def _signature_with_fields(func: Callable[..., Any], *classes: type) -> inspect.
     return sig.replace(parameters=[*own, *keyword_parameters(*classes)])
 
 
+@overload
 def generate(
     mesh_or_path: str | os.PathLike[str] | trimesh.Trimesh | Part,
-    gripper: GripperSpec | dict[str, Any],
+    gripper: GripperSpec,
     *,
     units: str | None = None,
     recording: Any = None,
@@ -71,7 +74,54 @@ def generate(
     params: Params | None = None,
     options: QualityOptions | None = None,
     **run_params: Any,
-) -> GraspSet:
+) -> GraspSet: ...
+
+
+@overload
+def generate(
+    mesh_or_path: str | os.PathLike[str] | trimesh.Trimesh | Part,
+    gripper: SuctionSpec,
+    *,
+    units: str | None = None,
+    recording: Any = None,
+    progress: Progress | None = None,
+    object_name: str | None = None,
+    object_version: int | None = None,
+    params: Params | None = None,
+    options: QualityOptions | None = None,
+    **run_params: Any,
+) -> SuctionGraspSet: ...
+
+
+@overload
+def generate(
+    mesh_or_path: str | os.PathLike[str] | trimesh.Trimesh | Part,
+    gripper: dict[str, Any],
+    *,
+    units: str | None = None,
+    recording: Any = None,
+    progress: Progress | None = None,
+    object_name: str | None = None,
+    object_version: int | None = None,
+    params: Params | None = None,
+    options: QualityOptions | None = None,
+    **run_params: Any,
+) -> GraspSet | SuctionGraspSet: ...
+
+
+def generate(
+    mesh_or_path: str | os.PathLike[str] | trimesh.Trimesh | Part,
+    gripper: GripperSpec | SuctionSpec | dict[str, Any],
+    *,
+    units: str | None = None,
+    recording: Any = None,
+    progress: Progress | None = None,
+    object_name: str | None = None,
+    object_version: int | None = None,
+    params: Params | None = None,
+    options: QualityOptions | None = None,
+    **run_params: Any,
+) -> GraspSet | SuctionGraspSet:
     """Grasps for one part and one gripper (see CONTRACT.md, Python API).
 
     The run parameters are the fields of `Params` and `QualityOptions` (params.py), each a keyword argument with the
@@ -90,10 +140,30 @@ def generate(
     weight plus `accel` in every direction are kept (`hold="off"` skips it). `position_tolerance` (m): criterion
     (c) holds for every surface normal within this distance of each contact. Every free roll is checked against
     the mesh's triangles (graspgen.collision).
+
+    A suction cup (a SuctionSpec, or a spec dict of kind "suction") runs the suction method instead
+    (graspgen.suction, docs/HOLD.md "Suction cups: the model") and returns a SuctionGraspSet.
     """
     report = progress or _noop
     params, options = from_keywords("generate", run_params, (Params, params), (QualityOptions, options))
-    spec = gripper if isinstance(gripper, GripperSpec) else GripperSpec.from_dict(gripper)
+    spec = gripper if isinstance(gripper, (GripperSpec, SuctionSpec)) else gripper_from_dict(gripper)
+    if isinstance(spec, SuctionSpec):
+        return generate_suction(
+            mesh_or_path,
+            spec,
+            params=params,
+            options=options,
+            units=units,
+            recording=recording,
+            progress=progress,
+            object_name=object_name,
+            object_version=object_version,
+        )
+    if params.max_tilt_deg is not None:
+        raise InvalidParameterError(
+            "max_tilt_deg is for suction cups: a parallel gripper's approach follows from its contacts",
+            field="max_tilt_deg",
+        )
     _check_geometry_params(spec, params)
     mu = spec.friction if params.friction is None else params.friction
     run = _Run(spec, params, options, mu, report, timings={}, started=time.perf_counter())
@@ -714,38 +784,6 @@ def _cluster_and_export(
         warnings=warnings,
         mass_kg=extras.mass_kg,
     )
-
-
-def choose_roll(free: np.ndarray) -> int:
-    """The roll at the middle of the widest circular run of free rolls.
-
-    Ties go to the run whose middle is closest to half a turn (approach from the object's +Z side, palm up),
-    then to the smaller index; with every roll free, half a turn itself.
-    """
-    R = len(free)
-    if free.all():
-        return R // 2
-    if not free.any():
-        raise ValueError("no free roll")
-    start = int(np.argmin(free))  # a blocked roll: runs do not wrap past it
-    best = None
-    k = 0
-    while k < R:
-        idx = (start + k) % R
-        if free[idx]:
-            length = 0
-            while k < R and free[(start + k) % R]:
-                length += 1
-                k += 1
-            middle = (idx + (length - 1) // 2) % R
-            dist = min(abs(middle - R // 2), R - abs(middle - R // 2))
-            key = (-length, dist, middle)
-            if best is None or key < best:
-                best = key
-        else:
-            k += 1
-    assert best is not None  # some roll is free
-    return int(best[2])
 
 
 def _grasps(cands: Candidates, medoids: np.ndarray, clusters: np.ndarray, sizes: np.ndarray) -> list[dict[str, Any]]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import os
 import uuid
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -18,7 +18,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
     from .export import GraspSet
 
-__all__ = ["record_run", "MAX_LOGGED_CANDIDATES", "cluster_colours", "SIM_COLOURS"]
+__all__ = ["record_run", "write_recording", "MAX_LOGGED_CANDIDATES", "cluster_colours", "SIM_COLOURS"]
 
 #: candidate midpoints beyond this many are thinned (evenly by index) to keep recordings small
 MAX_LOGGED_CANDIDATES = 200_000
@@ -47,21 +47,31 @@ def record_run(
     extra: dict[str, Any] | None = None,
 ) -> None:
     """Log one run into `target`: a RecordingStream of the caller's, or a path for a new .rrd (written whole)."""
+    rid = uuid.uuid5(
+        uuid.NAMESPACE_URL, f"graspgen:{result.object.get('sha256')}:{json.dumps(result.params.to_dict())}"
+    )
+    write_recording(target, rid, lambda stream: _log(stream, result, sample_points, sample_normals, extra))
+
+
+def write_recording(
+    target: str | os.PathLike[str] | rr.RecordingStream,
+    recording_id: uuid.UUID,
+    log: Callable[[rr.RecordingStream], None],
+) -> None:
+    """Run `log` on `target`: a RecordingStream of the caller's, or a path for a new .rrd (a stream of its own,
+    never the global one, written whole: a temporary file renamed into place)."""
     import rerun as rr
 
     if isinstance(target, rr.RecordingStream):
-        _log(target, result, sample_points, sample_normals, extra)
+        log(target)
         return
     path = Path(target)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-    rid = uuid.uuid5(
-        uuid.NAMESPACE_URL, f"graspgen:{result.object.get('sha256')}:{json.dumps(result.params.to_dict())}"
-    )
-    stream = rr.RecordingStream("graspgen", recording_id=rid)
+    stream = rr.RecordingStream("graspgen", recording_id=recording_id)
     try:
         stream.save(tmp)
-        _log(stream, result, sample_points, sample_normals, extra)
+        log(stream)
         stream.flush()
         stream.disconnect()
         os.replace(tmp, path)

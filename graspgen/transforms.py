@@ -1,4 +1,4 @@
-"""4x4 pose helpers and the contract's grasp frame (T_object_grasp).
+"""4x4 pose helpers and the contract's grasp frames (T_object_grasp): the jaws' and the suction cup's.
 
 Frame (CONTRACT.md): origin at the contact midpoint, +X the closing axis (contact 0 -> 1), +Z the approach
 direction, +Y = Z x X, roll psi about +X measured from Z0 = object +Z made orthogonal to X (object +X when
@@ -14,8 +14,11 @@ from . import libm
 __all__ = [
     "ROLL_REFERENCE_SWITCH",
     "roll_angles_rad",
+    "choose_roll",
     "roll_basis",
     "grasp_frames",
+    "approach_basis",
+    "suction_frames",
     "matrix_to_quaternion_xyzw",
     "quaternion_xyzw_to_matrix",
 ]
@@ -27,6 +30,38 @@ ROLL_REFERENCE_SWITCH = 0.9
 def roll_angles_rad(rolls: int) -> np.ndarray:
     """`2 pi k / rolls`, k = 0..rolls-1: (rolls,) float64."""
     return 2.0 * np.pi * np.arange(rolls, dtype=np.float64) / rolls
+
+
+def choose_roll(free: np.ndarray) -> int:
+    """The roll at the middle of the widest circular run of free rolls.
+
+    Ties go to the run whose middle is closest to half a turn (approach from the object's +Z side, palm up),
+    then to the smaller index; with every roll free, half a turn itself.
+    """
+    R = len(free)
+    if free.all():
+        return R // 2
+    if not free.any():
+        raise ValueError("no free roll")
+    start = int(np.argmin(free))  # a blocked roll: runs do not wrap past it
+    best = None
+    k = 0
+    while k < R:
+        idx = (start + k) % R
+        if free[idx]:
+            length = 0
+            while k < R and free[(start + k) % R]:
+                length += 1
+                k += 1
+            middle = (idx + (length - 1) // 2) % R
+            dist = min(abs(middle - R // 2), R - abs(middle - R // 2))
+            key = (-length, dist, middle)
+            if best is None or key < best:
+                best = key
+        else:
+            k += 1
+    assert best is not None  # some roll is free
+    return int(best[2])
 
 
 def roll_basis(axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -56,6 +91,36 @@ def grasp_frames(midpoints: np.ndarray, axes: np.ndarray, rolls_rad: np.ndarray)
     T[:, :3, 1] = y
     T[:, :3, 2] = z
     T[:, :3, 3] = midpoints
+    T[:, 3, 3] = 1.0
+    return T
+
+
+def approach_basis(approach: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Roll-0 basis of a suction grasp for unit approaches `approach` (n, 3) (CONTRACT.md "Suction cups"): (X0, Y0),
+    each (n, 3) unit, X0 = the object's +X made orthogonal to Z (its +Y when |X . Z| > 0.9), Y0 = Z x X0."""
+    z = np.asarray(approach, dtype=np.float64).reshape(-1, 3)
+    ref = np.zeros_like(z)
+    use_y = np.abs(z[:, 0]) > ROLL_REFERENCE_SWITCH
+    ref[~use_y, 0] = 1.0
+    ref[use_y, 1] = 1.0
+    x0 = ref - np.sum(ref * z, axis=1, keepdims=True) * z
+    x0 /= np.linalg.norm(x0, axis=1, keepdims=True)
+    return x0, np.cross(z, x0)
+
+
+def suction_frames(contacts: np.ndarray, approach: np.ndarray, rolls_rad: np.ndarray) -> np.ndarray:
+    """T_object_grasp of suction grasps: (n, 4, 4) float64 with the origin at the contact (n, 3), +Z the unit
+    approach (n, 3) and the roll psi (n,) about +Z: X = cos(psi) X0 + sin(psi) Y0, Y = Z x X (approach_basis)."""
+    contacts = np.asarray(contacts, dtype=np.float64).reshape(-1, 3)
+    z = np.asarray(approach, dtype=np.float64).reshape(-1, 3)
+    psi = np.asarray(rolls_rad, dtype=np.float64).reshape(-1, 1)
+    x0, y0 = approach_basis(z)
+    x = libm.cos(psi) * x0 + libm.sin(psi) * y0
+    T = np.zeros((len(z), 4, 4), dtype=np.float64)
+    T[:, :3, 0] = x
+    T[:, :3, 1] = np.cross(z, x)
+    T[:, :3, 2] = z
+    T[:, :3, 3] = contacts
     T[:, 3, 3] = 1.0
     return T
 

@@ -83,6 +83,10 @@ def warmup(*, log: Any = None) -> dict[str, Any]:
     step("clustering, parallel assignment", compile_parallel_kernels)
     step("validation, a CAD gripper's approach", _sweep)
     step("generate, a gripper from CAD", lambda: generate(part, _cad_gripper(), mass_kg=0.2, **small))
+    plate = trimesh.creation.box(extents=[0.08, 0.08, 0.02])
+    cup_run: dict[str, Any] = {"units": "m", "mass_kg": 0.2, "max_tilt_deg": 5, **small}
+    for label, cup in (("a suction cup", _cup(body=False)), ("a suction cup with a body", _cup(body=True))):
+        step(f"generate, {label}", lambda cup=cup: generate(plate, cup, **cup_run))
     root = cache_dir()
     return {
         "seconds": time.perf_counter() - t_all,
@@ -116,6 +120,33 @@ def _cad_gripper() -> Any:
     }
     files = {"finger.stl": stl([0.01, 0.02, 0.03], [0.005, 0, 0]), "body.stl": stl([0.1, 0.03, 0.02], [0, 0, -0.025])}
     return GripperSpec.from_dict(spec, files=files)
+
+
+def _cup(*, body: bool) -> Any:
+    """A 30 mm suction cup with a cylinder tool, or with a box-shaped body mesh (made here): the suction kernels a
+    job runs, the per-roll body test included."""
+    import io
+
+    from .suction import SuctionSpec
+
+    spec: dict[str, Any] = {
+        "name": "warmup-cup",
+        "kind": "suction",
+        "cup_radius": 0.015,
+        "cup_height": 0.02,
+        "max_strain": 0.1,
+        "vacuum": 60000,
+        "friction": 0.5,
+        "pregrasp_clearance": 0.03,
+    }
+    if not body:
+        return SuctionSpec.from_dict({**spec, "tool": {"radius": 0.012, "length": 0.12}})
+    box = trimesh.creation.box(extents=[0.03, 0.02, 0.1])
+    box.apply_translation([0.005, 0, -0.07])
+    buf = io.BytesIO()
+    box.export(buf, file_type="stl")
+    geometry = {"units": "m", "body": "body.stl"}
+    return SuctionSpec.from_dict({**spec, "geometry": geometry}, files={"body.stl": buf.getvalue()})
 
 
 def _sweep() -> None:

@@ -7,7 +7,8 @@ against the part's sampled points and against its triangles.
 - `_regions`: the regions of criterion (d) (`collision_model`) and their table as the kernels read it.
 - `_points`: the point kernel (free_rolls): every roll of every candidate against the sampled points.
 - `_hull`: the sample's convex hull, a certificate that the palm is clear at a roll.
-- `_tritree`: the part's triangle tree, the exact triangle tests, normals near a point.
+- `_tritree`: the part's triangle tree, the exact triangle tests, normals near a point, triangles near a segment
+  (graspgen.suction's walks).
 - `_triangles`: the mesh-exact check (mesh_free_rolls).
 - `_seat`: where a CAD finger first touches the part as it closes (the export's contacts).
 - `_frame`, `_bits`: the candidate's roll-0 frame and roll tables, roll masks.
@@ -23,7 +24,15 @@ from ._seat import Seat, seat_fingers, seat_friction_margin_deg
 from ._shapes import Box, Cuboid
 from ._solids import GripperSolids
 from ._triangles import mesh_free_rolls, mesh_free_rolls_of_pairs
-from ._tritree import MeshTree, build_tree, normal_spread_rad
+from ._tritree import (
+    MeshTree,
+    TriangleTree,
+    build_tree,
+    normal_spread_rad,
+    prism_meets_triangle,
+    tri_meets_solid,
+    triangles_near_segment,
+)
 
 __all__ = [
     "MAX_ROLLS",
@@ -35,6 +44,7 @@ __all__ = [
     "MeshSet",
     "MeshSolid",
     "MeshTree",
+    "TriangleTree",
     "Region",
     "Seat",
     "any_free",
@@ -49,6 +59,9 @@ __all__ = [
     "mesh_solid",
     "normal_spread_rad",
     "popcount",
+    "prism_meets_triangle",
     "seat_fingers",
     "seat_friction_margin_deg",
+    "tri_meets_solid",
+    "triangles_near_segment",
 ]

@@ -24,6 +24,7 @@ __all__ = [
     "prism_meets_triangle",
     "tri_meets_solid",
     "node_misses_box",
+    "triangles_near_segment",
 ]
 
 LEAF = 4
@@ -527,6 +528,52 @@ def tri_meets_solid(
             stack[top + 1] = children[k, RIGHT]
             top += 2
     return False
+
+
+# -- triangles near a segment (the suction cup's axis) ----------------------------------------------------------------
+
+
+@njit(cache=True, error_model="numpy")
+def triangles_near_segment(
+    tree: TriangleTree,
+    p: tuple[float, float, float],
+    q: tuple[float, float, float],
+    radius: float,
+    out: np.ndarray,
+    stack: np.ndarray,
+) -> int:
+    """Indices (into tree.triangles) of every triangle within `radius` of the segment p..q, and possibly more, into
+    `out` (capacity: the tree's triangle count); returns how many. A node is skipped when its ball (centre, radius
+    M_R, which holds its triangles) lies farther than `radius` from the segment: a sound prune, so the caller's exact
+    test of the listed triangles decides. `stack`: scratch of at least 128 entries."""
+    nodes, children = tree.nodes, tree.children
+    if nodes.shape[0] == 0:
+        return 0
+    dx, dy, dz = q[0] - p[0], q[1] - p[1], q[2] - p[2]
+    dd = dx * dx + dy * dy + dz * dz
+    n = 0
+    stack[0] = 0
+    top = 1
+    while top > 0:
+        top -= 1
+        k = stack[top]
+        cx, cy, cz = nodes[k, M_C] - p[0], nodes[k, M_C + 1] - p[1], nodes[k, M_C + 2] - p[2]
+        t = 0.0
+        if dd > 0.0:
+            t = min(max((cx * dx + cy * dy + cz * dz) / dd, 0.0), 1.0)
+        ex, ey, ez = cx - t * dx, cy - t * dy, cz - t * dz
+        reach = radius + nodes[k, M_R]
+        if ex * ex + ey * ey + ez * ez > reach * reach:
+            continue
+        if children[k, LEFT] < 0:
+            for tri in range(children[k, START], children[k, START] + children[k, COUNT]):
+                out[n] = tri
+                n += 1
+        else:
+            stack[top] = children[k, LEFT]
+            stack[top + 1] = children[k, RIGHT]
+            top += 2
+    return n
 
 
 def empty_tree() -> TriangleTree:

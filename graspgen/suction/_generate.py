@@ -1,0 +1,522 @@
+"""The suction method (CONTRACT.md "Suction cups"): sample the surface evenly, one candidate per sample point with the
+approach along its inward normal (and, with max_tilt_deg, tilted approaches on a cone), the criteria cheapest first
+(seal, tilt, hold, collision), then the paper's two-stage k-medoids over contact positions and signed approaches.
+
+`generate_suction` is what graspgen.generate runs for a SuctionSpec; it reports the stages load, sample, pairs (the
+per-candidate criteria seal, tilt and hold), collision, cluster and export to the progress callback, as the jaws do.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+import trimesh
+
+from .. import clustering, sampling
+from ..collision import MeshTree, TriangleTree, build_tree, mesh_solid
+from ..coverage import coverage
+from ..errors import InvalidMeshError, InvalidParameterError, InvalidUnitsError
+from ..hold import hold_load, part_mass
+from ..params import Params, QualityOptions
+from ..parts import Part, load_part
+from ..quality import center_of_mass
+from ..transforms import approach_basis, choose_roll, roll_angles_rad, suction_frames
+from ._collision import CollisionRule, body_frame, collision_kernel
+from ._export import SuctionCandidates, SuctionGraspSet
+from ._hold import LIMITS, HoldRule, hold_kernel
+from ._model import SUCTION, SuctionModel, depth_limits, inner_probes, lip_points
+from ._seal import PASS, REASONS, SealPart, SealRule, seal_kernel
+from ._spec import MAX_VACUUM, SuctionSpec
+
+__all__ = ["generate_suction", "suction_candidates", "judge_cups", "CupJudgement", "CRITERIA"]
+
+#: the criteria in the order they run (and the keys of stats.rejected)
+CRITERIA = ("seal", "tilt", "hold", "collision")
+
+Progress = Callable[[str, float], None]
+
+
+def _noop(stage: str, fraction: float) -> None:
+    return None
+
+
+@dataclass(frozen=True)
+class _Survivors:
+    """Candidates (indices into the sample, approaches) that passed the criteria so far, with what they carry."""
+
+    point: np.ndarray  # (n,) int64
+    approach: np.ndarray  # (n, 3)
+    strain: np.ndarray  # (n,)
+    tilt: np.ndarray  # (n,) rad
+    depth_min: np.ndarray  # (n,)
+    margin: np.ndarray | None = None  # (n,)
+    limit: np.ndarray | None = None  # (n,) int8
+
+    def keep(self, mask: np.ndarray) -> _Survivors:
+        idx = np.flatnonzero(mask)
+        m = self.margin.take(idx) if self.margin is not None else None
+        lim = self.limit.take(idx) if self.limit is not None else None
+        return _Survivors(
+            self.point.take(idx),
+            self.approach.take(idx, axis=0),
+            self.strain.take(idx),
+            self.tilt.take(idx),
+            self.depth_min.take(idx),
+            m,
+            lim,
+        )
+
+    def __len__(self) -> int:
+        return len(self.point)
+
+
+def suction_candidates(normals: np.ndarray, max_tilt_deg: float | None, model: SuctionModel = SUCTION) -> np.ndarray:
+    """(n * (1 + T), 3) unit approaches for the points with outward `normals` (n, 3), point-major: the inward normal,
+    then, with max_tilt_deg > 0, T = model.tilt_azimuths approaches at that angle from it, at azimuths 2 pi j / T
+    from the normal's roll-0 X (CONTRACT.md suction grasp frame)."""
+    inward = -np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    inward /= np.linalg.norm(inward, axis=1, keepdims=True)
+    if not max_tilt_deg:
+        return np.ascontiguousarray(inward)
+    theta = math.radians(max_tilt_deg)
+    x0, y0 = approach_basis(inward)
+    rows = [inward]
+    for j in range(model.tilt_azimuths):
+        phi = 2.0 * math.pi * j / model.tilt_azimuths
+        side = math.cos(phi) * x0 + math.sin(phi) * y0
+        rows.append(math.cos(theta) * inward + math.sin(theta) * side)
+    out = np.stack(rows, axis=1).reshape(-1, 3)
+    out /= np.linalg.norm(out, axis=1, keepdims=True)
+    return np.ascontiguousarray(out)
+
+
+@dataclass(frozen=True)
+class CupJudgement:
+    """Every criterion's outcome for given cups (judge_cups), arrays over n candidates."""
+
+    seal: np.ndarray  # (n,) str: "pass" or why the seal fails (reach, depth, stretch, hole)
+    seal_strain: np.ndarray  # (n,): the largest spring strain found (0 when the lip failed before its springs)
+    tilt_deg: np.ndarray  # (n,): the lip plane's angle to the approach (0 when the lip failed)
+    hold_margin: np.ndarray | None  # (n,), None without a mass
+    hold_limit: np.ndarray | None  # (n,) str: friction, peel or pull
+    free_rolls: np.ndarray  # (n, R) bool: the rolls at which cup and tool are clear
+
+
+def judge_cups(
+    mesh: trimesh.Trimesh,
+    spec: SuctionSpec,
+    points: np.ndarray,
+    approach: np.ndarray,
+    *,
+    mass_kg: float | None = None,
+    center_of_mass: np.ndarray | None = None,
+    accel: float = Params.accel,
+    safety_factor: float = Params.safety_factor,
+    friction: float | None = None,
+    rolls: int = Params.rolls,
+) -> CupJudgement:
+    """Each criterion of the suction method on its own, for cups at contacts `points` (n, 3) with unit approaches
+    `approach` (n, 3) on the closed `mesh` (metres): what generate() decides, without removing a candidate when an
+    earlier criterion fails (a cup whose lip failed is tested for collision from the contact's plane). The centre of
+    mass defaults to the mesh's."""
+    P = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    A = np.asarray(approach, dtype=np.float64).reshape(-1, 3)
+    A = np.ascontiguousarray(A / np.linalg.norm(A, axis=1, keepdims=True))
+    tree = build_tree(mesh.vertices, mesh.faces)
+    sealed = seal_kernel(SealPart(tree.record(), tree.normals), P, A, _seal_rule(spec))
+    names = np.array(["pass", *REASONS.values()])
+    margin = limit = None
+    if mass_kg is not None:
+        com = center_of_mass if center_of_mass is not None else _center_of_mass(mesh)
+        load = safety_factor * hold_load(mass_kg, accel)
+        mu = spec.friction if friction is None else friction
+        held = hold_kernel(P, A, HoldRule(spec.cup_radius, spec.vacuum_force, mu, load, np.asarray(com, float)))
+        margin, limit = held.margin, np.array(LIMITS)[held.limit]
+    crule, body = _collision_rule(spec, tree, Params(rolls=rolls))
+    free = collision_kernel(tree.record(), P, A, np.nan_to_num(sealed.depth_min, nan=0.0), crule, body)
+    return CupJudgement(
+        seal=names[sealed.status],
+        seal_strain=sealed.strain,
+        tilt_deg=np.degrees(sealed.tilt),
+        hold_margin=margin,
+        hold_limit=limit,
+        free_rolls=free,
+    )
+
+
+def _center_of_mass(mesh: trimesh.Trimesh) -> np.ndarray:
+    return center_of_mass(mesh, None)
+
+
+def generate_suction(
+    mesh_or_path: str | os.PathLike[str] | trimesh.Trimesh | Part,
+    spec: SuctionSpec,
+    *,
+    params: Params,
+    options: QualityOptions,
+    units: str | None = None,
+    recording: Any = None,
+    progress: Progress | None = None,
+    object_name: str | None = None,
+    object_version: int | None = None,
+) -> SuctionGraspSet:
+    """Suction grasps for one part (module docstring); the arguments as graspgen.generate takes them."""
+    report = progress or _noop
+    started = time.perf_counter()
+    _check_params(params, options)
+    mu = spec.friction if params.friction is None else params.friction
+    timings: dict[str, float] = {}
+
+    report("load", 0.0)
+    t0 = time.perf_counter()
+    if isinstance(mesh_or_path, Part):
+        part = mesh_or_path
+    else:
+        if units is None:
+            raise InvalidUnitsError("units are required (mm, cm, m or in)", field="units")
+        part = load_part(mesh_or_path, units=units, name=object_name)
+    if part.mesh is None:
+        raise InvalidMeshError(
+            "a suction cup's seal is judged on the part's triangles, and a point cloud has none: give the part as a "
+            "mesh (a scan meshed, or the CAD model)",
+            field="file",
+        )
+    mass, mass_note = part_mass(part, params.mass_kg, params.density)
+    com = center_of_mass(part.mesh, part.points)
+    timings["load"] = time.perf_counter() - t0
+    report("load", 1.0)
+
+    report("sample", 0.0)
+    t0 = time.perf_counter()
+    sample = sampling.sample_surface(part, params.points, seed=params.seed)
+    pts, nrm = sample.points, sample.normals
+    tree = build_tree(part.mesh.vertices, part.mesh.faces)
+    timings["sample"] = time.perf_counter() - t0
+    report("sample", 1.0)
+
+    report("pairs", 0.0)
+    t0 = time.perf_counter()
+    approach = suction_candidates(nrm, params.max_tilt_deg)
+    per_point = len(approach) // max(len(pts), 1)
+    point = np.repeat(np.arange(len(pts), dtype=np.int64), per_point)
+    total = len(point)
+    rule = _seal_rule(spec)
+    sealed = seal_kernel(SealPart(tree.record(), tree.normals), pts[point], approach, rule)
+    ok = sealed.status == PASS
+    seal_counts = {name: int(np.count_nonzero(sealed.status == code)) for code, name in REASONS.items()}
+    s = _Survivors(point, approach, sealed.strain, sealed.tilt, sealed.depth_min).keep(ok)
+    rejected = {"seal": total - len(s), "tilt": 0, "hold": 0, "collision": 0}
+    timings["seal"] = time.perf_counter() - t0
+    report("pairs", 0.5)
+    if params.max_tilt_deg is not None:
+        within = s.tilt <= math.radians(params.max_tilt_deg) + SUCTION.tilt_slack
+        rejected["tilt"] = len(s) - int(np.count_nonzero(within))
+        s = s.keep(within)
+
+    t0 = time.perf_counter()
+    hold_on = params.hold != "off" and mass is not None
+    load = None
+    hold_diag = None
+    if hold_on:
+        assert mass is not None  # hold_on needs it
+        load = params.safety_factor * hold_load(mass, params.accel)
+        held = hold_kernel(pts[s.point], s.approach, HoldRule(spec.cup_radius, spec.vacuum_force, mu, load, com))
+        keep = held.margin >= 1.0
+        rejected["hold"] = len(s) - int(np.count_nonzero(keep))
+        if len(s) and not keep.any():
+            best = int(np.argmax(held.margin))
+            hold_diag = _hold_diagnosis(float(held.margin[best]), LIMITS[int(held.limit[best])], spec, mass, params)
+        s = replace(s, margin=held.margin, limit=held.limit).keep(keep)
+    timings["hold"] = time.perf_counter() - t0
+    report("pairs", 1.0)
+
+    report("collision", 0.0)
+    t0 = time.perf_counter()
+    crule, body = _collision_rule(spec, tree, params)
+    free = collision_kernel(tree.record(), pts[s.point], s.approach, s.depth_min, crule, body)
+    clear = np.asarray(free.any(axis=1), dtype=bool)
+    rejected["collision"] = len(s) - int(np.count_nonzero(clear))
+    s, free = s.keep(clear), free[clear]
+    timings["collision"] = time.perf_counter() - t0
+    report("collision", 1.0)
+
+    cands = SuctionCandidates(
+        contacts=pts[s.point].reshape(-1, 1, 3),
+        normals=nrm[s.point].reshape(-1, 1, 3),
+        approach=np.ascontiguousarray(s.approach),
+        free_rolls=free,
+        roll_angles_rad=roll_angles_rad(params.rolls),
+        seal_strain=s.strain,
+        tilt_deg=np.degrees(s.tilt),
+        labels=np.full((len(s), 2), -1, dtype=np.int32),
+        medoids=np.zeros(0, dtype=np.int64),
+        hold_margin=s.margin,
+    )
+    stats: dict[str, Any] = {
+        "points": len(pts),
+        "candidates_total": total,
+        "rejected": rejected,
+        "candidates": len(cands),
+        "timings_s": timings,
+        "spacing_mean": float(sample.spacing),
+        "spacing_min": float(sample.min_spacing),
+        "watertight": bool(part.watertight),
+        "warnings": list(part.warnings),
+        "seal": {**seal_counts, "lip_points": len(rule.lip), "interior_probes": len(rule.inner)},
+    }
+    if hold_on:
+        stats["hold"] = {
+            "mass_kg": mass,
+            "load_n": load,
+            "safety_factor": params.safety_factor,
+            "vacuum_force_n": spec.vacuum_force,
+            "friction": mu,
+            "center_of_mass": [float(v) for v in com],
+            "min_margin": float(np.min(s.margin)) if len(s) and s.margin is not None else None,
+            "limits": {name: int(np.count_nonzero(s.limit == k)) for k, name in enumerate(LIMITS)}
+            if s.limit is not None
+            else {},
+        }
+    elif params.hold != "off":
+        stats["warnings"].append("criterion hold is off: it needs the part's mass (mass_kg or density)")
+    if mass_note:
+        stats["warnings"].append(mass_note)
+    if len(cands) == 0:
+        stats["empty_reason"] = _empty_reason(rejected, total, spec, params, seal_counts, hold_diag)
+
+    result = _cluster_and_export(cands, s, part, spec, params, mu, stats, report, started, mass, object_name)
+    result.object["version"] = object_version
+    if recording is not None:
+        from ._recording import record_suction_run
+
+        record_suction_run(recording, result, part=part, sample_points=pts, sample_normals=nrm)
+    return result
+
+
+def _check_params(params: Params, options: QualityOptions) -> None:
+    """The run parameters and options that have no meaning for a suction cup are refused, not ignored."""
+    if params.inside:
+        raise InvalidParameterError("inside grasps are for jaws: a suction cup seals on an outer face", field="inside")
+    if params.collision != "swept":
+        raise InvalidParameterError(
+            "a suction cup's collision is the cup and tool swept from the pre-grasp pose (mode 'swept'); the paper's "
+            "mode is for jaws",
+            field="collision",
+        )
+    if options.validate:
+        raise InvalidParameterError("validation of suction grasps in simulation is not available yet", field="validate")
+    if options.select != "medoid":
+        raise InvalidParameterError(
+            "suction grasps are selected as the clusters' medoids (select 'medoid')", field="select"
+        )
+
+
+def _seal_rule(spec: SuctionSpec, model: SuctionModel = SUCTION) -> SealRule:
+    lo, hi = depth_limits(spec.cup_radius, spec.cup_height, spec.max_strain)
+    return SealRule(
+        float(spec.cup_radius),
+        float(spec.cup_height),
+        float(spec.max_strain),
+        lo,
+        hi,
+        model.recess_depth,
+        lip_points(spec.cup_radius, model),
+        inner_probes(spec.cup_radius, model),
+        model.guard,
+    )
+
+
+def _collision_rule(
+    spec: SuctionSpec, tree: MeshTree, params: Params, model: SuctionModel = SUCTION
+) -> tuple[CollisionRule, TriangleTree]:
+    """The collision kernel's rule and the body's tree (in body_frame; without triangles for a cylinder tool)."""
+    c, H = float(spec.pregrasp_clearance), float(spec.cup_height)
+    size = float(np.max(np.abs(tree.triangles))) if len(tree) else 1.0
+    guard = model.guard * (size + H + c)
+    angles = roll_angles_rad(params.rolls)
+    cos = np.array([math.cos(t) for t in angles])
+    sin = np.array([math.sin(t) for t in angles])
+    tool_r = tool_z0 = tool_z1 = 0.0
+    body = build_tree(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)).record()
+    body_r = body_z0 = body_z1 = 0.0
+    if spec.tool is not None:
+        tool_r = float(spec.tool.radius)
+        tool_z0, tool_z1 = -(H + float(spec.tool.length) + c), -H
+    else:
+        assert spec.geometry is not None  # a spec has a tool or a body
+        v = spec.geometry.vertices
+        body = mesh_solid(body_frame(v), spec.geometry.faces).record()
+        body_r = float(np.max(np.hypot(v[:, 0], v[:, 1])))
+        body_z0, body_z1 = float(v[:, 2].min()) - c, float(v[:, 2].max())
+    rule = CollisionRule(
+        float(spec.cup_radius),
+        -(H + c),
+        model.lip_clearance,
+        tool_r,
+        tool_z0,
+        tool_z1,
+        body_r,
+        body_z0,
+        body_z1,
+        c,
+        cos,
+        sin,
+        guard,
+    )
+    return rule, body
+
+
+def _cluster_and_export(
+    cands: SuctionCandidates,
+    s: _Survivors,
+    part: Part,
+    spec: SuctionSpec,
+    params: Params,
+    mu: float,
+    stats: dict[str, Any],
+    report: Progress,
+    started: float,
+    mass: float | None,
+    object_name: str | None,
+) -> SuctionGraspSet:
+    """Two-stage k-medoids (contacts, then signed approaches), the export's grasps best first within each
+    translation cluster (the larger hold margin, else the smaller seal strain, then the candidate index)."""
+    report("cluster", 0.0)
+    t0 = time.perf_counter()
+    res = clustering.two_stage(cands.midpoints, cands.approach, params.k1, params.k2, seed=params.seed, signed=True)
+    stats["timings_s"]["cluster"] = time.perf_counter() - t0
+    if res.note:
+        stats["cluster_note"] = res.note
+    report("cluster", 1.0)
+
+    report("export", 0.0)
+    medoids = np.asarray(res.medoids, dtype=np.int64)
+    clusters = np.asarray(res.medoid_clusters, dtype=np.int64).reshape(-1, 2)
+    sizes = np.asarray(res.cluster_sizes, dtype=np.int64)
+    labels = np.asarray(res.labels, dtype=np.int32).reshape(-1, 2)
+    key = cands.hold_margin[medoids] if cands.hold_margin is not None else -cands.seal_strain[medoids]
+    order = np.lexsort((medoids, -key, clusters[:, 0])) if len(medoids) else medoids
+    medoids, clusters, sizes = medoids[order], clusters[order], sizes[order]
+    cands = replace(cands, labels=labels, medoids=medoids)
+    stats["export_order"] = "hold_margin" if cands.hold_margin is not None else "seal_strain"
+    grasps = _grasps(cands, s, medoids, clusters, sizes)
+    stats["coverage"] = coverage(cands.midpoints, cands.approach, medoids).to_json()
+    stats["timings_s"]["total"] = time.perf_counter() - started
+    report("export", 1.0)
+    obj = {"name": object_name or part.name, "version": None, "sha256": part.sha256, "source_units": part.source_units}
+    return SuctionGraspSet(
+        object=obj,
+        gripper=spec,
+        params=params,
+        friction=mu,
+        stats=stats,
+        grasps=grasps,
+        candidates=cands,
+        warnings=list(part.warnings),
+        mass_kg=mass,
+    )
+
+
+def _grasps(
+    cands: SuctionCandidates, s: _Survivors, medoids: np.ndarray, clusters: np.ndarray, sizes: np.ndarray
+) -> list[dict[str, Any]]:
+    """The exported grasps: pose at roll 0 when every roll is free (a round tool), else at the middle of the widest
+    run of free rolls (graspgen.transforms.choose_roll)."""
+    if len(medoids) == 0:
+        return []
+    rolls = np.array([0 if cands.free_rolls[m].all() else choose_roll(cands.free_rolls[m]) for m in medoids])
+    psi = cands.roll_angles_rad[rolls]
+    T = suction_frames(cands.contacts[medoids, 0], cands.approach[medoids], psi)
+    out = []
+    for r, m in enumerate(medoids):
+        g: dict[str, Any] = {
+            "pose": T[r].tolist(),
+            "contacts": cands.contacts[m].tolist(),
+            "normals": cands.normals[m].tolist(),
+            "approach": cands.approach[m].tolist(),
+            "free_rolls_deg": [round(float(v), 9) for v in np.degrees(cands.roll_angles_rad[cands.free_rolls[m]])],
+            "cluster": [int(clusters[r, 0]), int(clusters[r, 1])],
+            "cluster_size": int(sizes[r]),
+            "roll_deg": round(float(np.degrees(psi[r])), 9),
+            "candidate": int(m),
+            "seal_strain": round(float(cands.seal_strain[m]), 9),
+            "tilt_deg": round(float(cands.tilt_deg[m]), 9),
+        }
+        if cands.hold_margin is not None and s.limit is not None:
+            g["hold_margin"] = round(float(cands.hold_margin[m]), 6)
+            g["hold_limit"] = LIMITS[int(s.limit[m])]
+        out.append(g)
+    return out
+
+
+def _hold_diagnosis(best: float, limit: str, spec: SuctionSpec, mass: float, params: Params) -> dict[str, Any]:
+    """What would make the best sealing cup hold: its margin grows with the vacuum and falls with the mass."""
+    need = spec.vacuum / best if best > 0 else math.inf
+    max_mass = mass * best
+    more = (
+        f"a vacuum of at least {need:.0f} Pa (the cup has {spec.vacuum:g} Pa)"
+        if need <= MAX_VACUUM
+        else f"more than any vacuum gives ({need:.0f} Pa, above one atmosphere): a larger cup or several cups"
+    )
+    return {
+        "best_margin": best,
+        "limit": limit,
+        "vacuum_needed": need,
+        "max_mass_kg": max_mass,
+        "message": (
+            f"no sealing cup holds the part (criterion hold): the best resists {best:.2f} of the load ({mass:g} kg at "
+            f"{params.accel:g} m/s^2 beyond gravity, safety factor {params.safety_factor:g}), limited by {limit}; it "
+            f"needs {more}, or a part under {max_mass:.3f} kg"
+        ),
+    }
+
+
+def _empty_reason(
+    rejected: dict[str, int],
+    total: int,
+    spec: SuctionSpec,
+    params: Params,
+    seal_counts: dict[str, int],
+    hold_diag: dict[str, Any] | None,
+) -> dict[str, Any]:
+    """Which criterion removed the last candidates, and what to change."""
+    left = total
+    criterion = "seal"
+    for criterion in CRITERIA:
+        left -= rejected[criterion]
+        if left <= 0:
+            break
+    if criterion == "hold" and hold_diag is not None:
+        return {"criterion": "hold", **hold_diag}
+    cup = f"{2 * spec.cup_radius * 1e3:.0f} mm"
+    if criterion == "seal":
+        why = max(seal_counts, key=lambda k: seal_counts[k]) if any(seal_counts.values()) else "reach"
+        message = {
+            "reach": f"the lip (a {cup} cup) runs off the part or off its curve wherever it is put: the part's "
+            "faces are narrower or more curved than the cup; use a smaller cup",
+            "depth": f"the surface under the lip (a {cup} cup) is too curved or stepped for max_strain "
+            f"{spec.max_strain:g}: use a smaller cup or a softer lip (a larger max_strain, a taller bellows)",
+            "stretch": f"the lip (a {cup} cup) crosses an edge or a crease wherever it is put: use a smaller cup or "
+            "a softer lip (a larger max_strain)",
+            "hole": f"every spot the lip (a {cup} cup) seals on spans a hole, slot or gap: use a smaller cup",
+        }[why]
+        return {"criterion": "seal", "seal_failure": why, "message": message}
+    if criterion == "tilt":
+        return {
+            "criterion": "tilt",
+            "message": f"no sealing approach lies within max_tilt_deg = {params.max_tilt_deg:g} of the surface's "
+            "normal under the lip: raise max_tilt_deg, or leave it out (approaches along the normals)",
+        }
+    if criterion == "hold":
+        return {"criterion": "hold", "message": "no sealing cup holds the part (criterion hold)"}
+    return {
+        "criterion": "collision",
+        "message": "the cup or the tool meets the part on the way in wherever the cup seals: use a narrower or "
+        "shorter tool, or a smaller pregrasp_clearance",
+    }
