@@ -12,13 +12,10 @@ the contract's cup-30 (30 mm lip, 60 kPa, friction 0.5, 10 % stretch); every par
    grasp is simulated (graspgen.physics_suction) nominally and under each member of `suction_perturbation_set(0)`
    (mass x0.5 / x1.5, vacuum x0.7, friction 0.3 / 0.6, gravity turned to -Z, +-X, +-Y, a lateral shake of 1 g, a
    seeded mixture). Held = held under all 13. Reported per part: exported grasps, held fraction, failures by reason.
-2. The confusion table of `hold`: up to `--sample` candidates per part whose hold margin is >= 1 and as many whose
-   margin is < 1 (seeded choice among the candidates that passed every other criterion), each simulated under the
-   same 13, against the simulation's verdict (held under all / nominal only).
-
-When this checkout's generate() takes no suction spec, the candidates are `--points` evenly sampled surface points
-with the approach along the inward normal (roll 0), `--sample` of them simulated per part, and there is no
-confusion table: the section says so.
+2. The confusion table of `hold`: generate() again with hold off (the candidates that pass seal and collision),
+   `graspgen.suction.judge_cups` gives each its hold margin (the same mass, accel, safety factor and centre of mass
+   as generate()); up to `--sample` candidates per part with margin >= 1 and as many with margin < 1 (seeded) are
+   simulated under the same 13, against the simulation's verdict (held under all / nominal only).
 
 The markdown goes between the `bench_suction_hold` markers of `--out` (appended when absent); no assertions.
 """
@@ -75,19 +72,9 @@ def parts(names: list[str] | None):
                 yield f"{folder.name}/{path.stem}", load_part(path, units=units[file], name=path.stem)
 
 
-def load_cup(path: str | None):
-    """The suction spec (graspgen.suction.SuctionSpec when this checkout has it, else the contract's fields)."""
-    data = json.loads(Path(path).read_text()) if path else dict(CUP_30)
-    try:
-        from graspgen.suction import SuctionSpec
-    except ImportError:
-        return ps.SuctionCup.of(argparse.Namespace(**data)), data
-    make = getattr(SuctionSpec, "from_dict", None)
-    return (make(data) if make else SuctionSpec(**data)), data
-
-
-def library_generates_suction(spec) -> bool:
-    return type(spec).__name__ == "SuctionSpec" and hasattr(graspgen, "generate")
+def load_cup(path: str | None) -> dict:
+    """The suction spec's fields (generate() takes the dict; the contract's cup-30 by default)."""
+    return json.loads(Path(path).read_text()) if path else dict(CUP_30)
 
 
 def frames(contacts: np.ndarray, approaches: np.ndarray) -> np.ndarray:
@@ -128,27 +115,15 @@ def failures(grid) -> dict[str, int]:
     return out
 
 
-def run_part(label, part, spec, args, members) -> dict:
-    cup = ps.SuctionCup.of(spec)
+def run_part(label, part, spec: dict, args, members) -> dict:
     row: dict = {"part": label}
     t0 = time.perf_counter()
-    if library_generates_suction(spec):
-        gs = graspgen.generate(part, spec, points=args.points, k1=args.k1, k2=args.k2, seed=0, mass_kg=args.mass)
-        row["generate_s"] = time.perf_counter() - t0
-        row["source"] = "export"
-        poses = np.array([np.asarray(g["pose"], dtype=np.float64) for g in gs.grasps]).reshape(-1, 4, 4)
-        row["rejected"] = gs.stats.get("rejected")
-        row["empty_reason"] = gs.stats.get("empty_reason")
-        confusion_candidates = gs.candidates
-    else:
-        from graspgen.sampling import sample_surface
-
-        sample = sample_surface(part, args.points, seed=0)
-        rng = np.random.default_rng(0)
-        pick = np.sort(rng.choice(len(sample.points), min(args.sample, len(sample.points)), replace=False))
-        poses = frames(sample.points[pick], -sample.normals[pick])
-        row["source"] = "sampled"
-        confusion_candidates = None
+    gs = graspgen.generate(part, spec, points=args.points, k1=args.k1, k2=args.k2, seed=0, mass_kg=args.mass)
+    row["generate_s"] = time.perf_counter() - t0
+    cup = ps.SuctionCup.of(gs.gripper)
+    poses = np.array([np.asarray(g["pose"], dtype=np.float64) for g in gs.grasps]).reshape(-1, 4, 4)
+    row["rejected"] = gs.stats.get("rejected")
+    row["empty_reason"] = (gs.stats.get("empty_reason") or {}).get("criterion")
     t1 = time.perf_counter()
     grid = simulate(part, poses, cup, args, members) if len(poses) else []
     row["simulate_s"] = time.perf_counter() - t1
@@ -157,33 +132,45 @@ def run_part(label, part, spec, args, members) -> dict:
     row["held"] = int(held.sum())
     row["nominal_held"] = int(sum(r[0].success for r in grid))
     row["failures"] = failures(grid)
-    row["no_seal_details"] = sorted({r.detail for g in grid for r in g if r.reason == "no_seal" and r.detail})[:5]
-    if confusion_candidates is not None:
-        row["confusion"] = confusion(part, confusion_candidates, cup, args, members)
+    row["failed"] = [
+        {
+            "grasp": i,
+            "hold_margin": gs.grasps[i].get("hold_margin"),
+            "outcomes": [r.to_json() for r in g if not r.success],
+        }
+        for i, g in enumerate(grid)
+        if not held[i]
+    ]
+    row["confusion"] = confusion(part, spec, cup, args, members)
     return row
 
 
-def confusion(part, c, cup, args, members) -> dict | None:
-    """hold's verdict (margin >= 1) against the simulation on up to args.sample candidates of each class."""
-    margin = getattr(c, "hold_margin", None)
-    if margin is None:
-        return None
-    margin = np.asarray(margin, dtype=np.float64)
-    contacts = np.asarray(c.contacts, dtype=np.float64).reshape(len(margin), -1, 3)[:, 0]
-    axes = np.asarray(c.axes, dtype=np.float64).reshape(len(margin), 3)
+def confusion(part, spec: dict, cup, args, members) -> dict:
+    """hold's verdict (margin >= 1) against the simulation on up to args.sample candidates of each class, among the
+    candidates that pass every other criterion."""
+    from graspgen.suction import judge_cups
+
+    off = graspgen.generate(part, spec, points=args.points, k1=args.k1, k2=args.k2, seed=0, hold="off")
+    c = off.candidates
+    contacts = np.asarray(c.contacts, dtype=np.float64).reshape(-1, 3)
+    approach = np.asarray(c.axes, dtype=np.float64).reshape(-1, 3)
+    margin = judge_cups(part.mesh, off.gripper, contacts, approach, mass_kg=args.mass).hold_margin
+    assert margin is not None
     rng = np.random.default_rng(1)
     out = {}
     for name, mask in (("pass", margin >= 1.0), ("fail", margin < 1.0)):
         idx = np.flatnonzero(mask)
         idx = np.sort(rng.choice(idx, min(args.sample, len(idx)), replace=False)) if len(idx) else idx
-        grid = simulate(part, frames(contacts[idx], axes[idx]), cup, args, members, keys=idx) if len(idx) else []
+        grid = simulate(part, frames(contacts[idx], approach[idx]), cup, args, members, keys=idx) if len(idx) else []
+        held = ps.held(grid) if grid else np.zeros(0, dtype=bool)
         out[name] = {
             "candidates": int(mask.sum()),
             "simulated": len(idx),
-            "held_all": int(ps.held(grid).sum()) if grid else 0,
+            "held_all": int(held.sum()),
             "held_nominal": int(sum(r[0].success for r in grid)),
+            "no_seal": int(sum(r[0].reason == "no_seal" for r in grid)),
             "margins": [round(float(margin[i]), 3) for i in idx],
-            "held": ps.held(grid).tolist() if grid else [],
+            "held": held.tolist(),
             "reasons": failures(grid),
         }
     return out
@@ -191,7 +178,6 @@ def confusion(part, c, cup, args, members) -> dict | None:
 
 def markdown(rows, members, args, wall) -> str:
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=ROOT).stdout
-    source = rows[0]["source"] if rows else "export"
     lines = [
         START,
         "## Suction cups in the simulation (issue 33): `bench_suction_hold.py`",
@@ -208,15 +194,7 @@ def markdown(rows, members, args, wall) -> str:
         ),
         "",
     ]
-    if source != "export":
-        lines += [
-            "This checkout's generate() takes no suction spec yet: the rows are "
-            f"{args.sample} seeded surface samples per part with the approach along the inward normal, not exports, "
-            "and there is no confusion table.",
-            "",
-        ]
-    what = "exported" if source == "export" else "sampled"
-    lines += [f"| part | {what} | held | nominal held | failures (reason, member: count) |", "|---|---|---|---|---|"]
+    lines += ["| part | exported | held | nominal held | failures (reason, member: count) |", "|---|---|---|---|---|"]
     n_all = h_all = 0
     for r in rows:
         n, h = r["grasps"], r["held"]
@@ -280,7 +258,7 @@ def main() -> None:
     ap.add_argument("--command", help="with --render: the earlier run's command line")
     ap.add_argument("--out", default=str(ROOT / "docs" / "benchmarks_quality.md"))
     args = ap.parse_args()
-    spec, _ = load_cup(args.cup)
+    spec = load_cup(args.cup)
     members = (ps.SUCTION_NOMINAL, *ps.suction_perturbation_set(0))
     rows = json.loads(Path(args.render).read_text()) if args.render else []
     t_all = time.perf_counter()
