@@ -170,85 +170,15 @@ def generate_suction(
     report = progress or _noop
     started = time.perf_counter()
     _check_params(params, options)
-    mu = spec.friction if params.friction is None else params.friction
-    timings: dict[str, float] = {}
-
-    report("load", 0.0)
-    t0 = time.perf_counter()
-    if isinstance(mesh_or_path, Part):
-        part = mesh_or_path
-    else:
-        if units is None:
-            raise InvalidUnitsError("units are required (mm, cm, m or in)", field="units")
-        part = load_part(mesh_or_path, units=units, name=object_name)
-    if part.mesh is None:
-        raise InvalidMeshError(
-            "a suction cup's seal is judged on the part's triangles, and a point cloud has none: give the part as a "
-            "mesh (a scan meshed, or the CAD model)",
-            field="file",
-        )
-    mass, mass_note = part_mass(part, params.mass_kg, params.density)
-    com = center_of_mass(part.mesh, part.points)
-    timings["load"] = time.perf_counter() - t0
-    report("load", 1.0)
-
-    report("sample", 0.0)
-    t0 = time.perf_counter()
-    sample = sampling.sample_surface(part, params.points, seed=params.seed)
-    pts, nrm = sample.points, sample.normals
-    tree = build_tree(part.mesh.vertices, part.mesh.faces)
-    timings["sample"] = time.perf_counter() - t0
-    report("sample", 1.0)
-
-    report("pairs", 0.0)
-    t0 = time.perf_counter()
-    approach = suction_candidates(nrm, params.max_tilt_deg)
-    per_point = len(approach) // max(len(pts), 1)
-    point = np.repeat(np.arange(len(pts), dtype=np.int64), per_point)
-    total = len(point)
-    rule = _seal_rule(spec)
-    sealed = seal_kernel(SealPart(tree.record(), tree.normals), pts[point], approach, rule)
-    ok = sealed.status == PASS
-    seal_counts = {name: int(np.count_nonzero(sealed.status == code)) for code, name in REASONS.items()}
-    s = _Survivors(point, approach, sealed.strain, sealed.tilt, sealed.depth_min).keep(ok)
-    rejected = {"seal": total - len(s), "tilt": 0, "hold": 0, "collision": 0}
-    timings["seal"] = time.perf_counter() - t0
-    report("pairs", 0.5)
-    if params.max_tilt_deg is not None:
-        within = s.tilt <= math.radians(params.max_tilt_deg) + SUCTION.tilt_slack
-        rejected["tilt"] = len(s) - int(np.count_nonzero(within))
-        s = s.keep(within)
-
-    t0 = time.perf_counter()
-    hold_on = params.hold != "off" and mass is not None
-    load = None
-    hold_diag = None
-    if hold_on:
-        assert mass is not None  # hold_on needs it
-        load = params.safety_factor * hold_load(mass, params.accel)
-        held = hold_kernel(pts[s.point], s.approach, HoldRule(spec.cup_radius, spec.vacuum_force, mu, load, com))
-        keep = held.margin >= 1.0
-        rejected["hold"] = len(s) - int(np.count_nonzero(keep))
-        if len(s) and not keep.any():
-            best = int(np.argmax(held.margin))
-            hold_diag = _hold_diagnosis(float(held.margin[best]), LIMITS[int(held.limit[best])], spec, mass, params)
-        s = replace(s, margin=held.margin, limit=held.limit).keep(keep)
-    timings["hold"] = time.perf_counter() - t0
-    report("pairs", 1.0)
-
-    report("collision", 0.0)
-    t0 = time.perf_counter()
-    crule, body = _collision_rule(spec, tree, params)
-    free = collision_kernel(tree.record(), pts[s.point], s.approach, s.depth_min, crule, body)
-    clear = np.asarray(free.any(axis=1), dtype=bool)
-    rejected["collision"] = len(s) - int(np.count_nonzero(clear))
-    s, free = s.keep(clear), free[clear]
-    timings["collision"] = time.perf_counter() - t0
-    report("collision", 1.0)
-
+    run = _Run(spec, params, spec.friction if params.friction is None else params.friction, report, {})
+    loaded = _load(run, mesh_or_path, units, object_name)
+    surface = _sample(run, loaded.part)
+    sealed = _seal(run, surface)
+    held = _hold(run, loaded, surface, sealed.survivors)
+    s, free = _collide(run, surface, held.survivors)
     cands = SuctionCandidates(
-        contacts=pts[s.point].reshape(-1, 1, 3),
-        normals=nrm[s.point].reshape(-1, 1, 3),
+        contacts=surface.points[s.point].reshape(-1, 1, 3),
+        normals=surface.normals[s.point].reshape(-1, 1, 3),
         approach=np.ascontiguousarray(s.approach),
         free_rolls=free,
         roll_angles_rad=roll_angles_rad(params.rolls),
@@ -258,26 +188,203 @@ def generate_suction(
         medoids=np.zeros(0, dtype=np.int64),
         hold_margin=s.margin,
     )
-    stats: dict[str, Any] = {
-        "points": len(pts),
-        "candidates_total": total,
-        "rejected": rejected,
-        "candidates": len(cands),
-        "timings_s": timings,
-        "spacing_mean": float(sample.spacing),
-        "spacing_min": float(sample.min_spacing),
-        "watertight": bool(part.watertight),
-        "warnings": list(part.warnings),
-        "seal": {**seal_counts, "lip_points": len(rule.lip), "interior_probes": len(rule.inner)},
+    stats = _stats(run, loaded, surface, sealed, held, s)
+    result = _cluster_and_export(cands, s, loaded, run, stats, started, (object_name, object_version))
+    if recording is not None:
+        from ._recording import record_suction_run
+
+        record_suction_run(
+            recording, result, part=loaded.part, sample_points=surface.points, sample_normals=surface.normals
+        )
+    return result
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# the stages of generate_suction(), each a function of the run and the earlier stages' results
+
+
+@dataclass(frozen=True)
+class _Run:
+    """One run's checked inputs; `timings`: stage -> seconds (the export's stats.timings_s), in order."""
+
+    spec: SuctionSpec
+    params: Params
+    #: the friction coefficient the run uses: the parameter, else the cup's
+    mu: float
+    report: Progress
+    timings: dict[str, float]
+
+
+@dataclass(frozen=True)
+class _Loaded:
+    """The part in metres (a mesh), its mass (kg; None without mass_kg or density) and centre of mass (3,)."""
+
+    part: Part
+    mass: float | None
+    mass_note: str | None
+    com: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Surface:
+    """The sampled surface and the part's triangle tree."""
+
+    points: np.ndarray  # (k, 3) metres
+    normals: np.ndarray  # (k, 3) unit, outward
+    spacing: float
+    min_spacing: float
+    tree: MeshTree
+
+
+@dataclass(frozen=True)
+class _Sealed:
+    """The candidates made, those that seal (and pass tilt), and the counts."""
+
+    total: int
+    survivors: _Survivors
+    rejected_seal: int
+    rejected_tilt: int
+    #: seal failures by reason (REASONS' names)
+    counts: dict[str, int]
+    rule: SealRule
+
+
+@dataclass(frozen=True)
+class _Held:
+    """Criterion hold: the survivors that hold (all of them when it did not run)."""
+
+    survivors: _Survivors
+    active: bool
+    removed: int
+    load: float | None
+    #: when hold removed every candidate: what would make the best one hold
+    diagnosis: dict[str, Any] | None
+
+
+def _load(
+    run: _Run, mesh_or_path: str | os.PathLike[str] | trimesh.Trimesh | Part, units: str | None, name: str | None
+) -> _Loaded:
+    run.report("load", 0.0)
+    t0 = time.perf_counter()
+    if isinstance(mesh_or_path, Part):
+        part = mesh_or_path
+    else:
+        if units is None:
+            raise InvalidUnitsError("units are required (mm, cm, m or in)", field="units")
+        part = load_part(mesh_or_path, units=units, name=name)
+    if part.mesh is None:
+        raise InvalidMeshError(
+            "a suction cup's seal is judged on the part's triangles, and a point cloud has none: give the part as a "
+            "mesh (a scan meshed, or the CAD model)",
+            field="file",
+        )
+    mass, mass_note = part_mass(part, run.params.mass_kg, run.params.density)
+    com = center_of_mass(part.mesh, part.points)
+    run.timings["load"] = time.perf_counter() - t0
+    run.report("load", 1.0)
+    return _Loaded(part, mass, mass_note, com)
+
+
+def _sample(run: _Run, part: Part) -> _Surface:
+    assert part.mesh is not None  # _load refuses point clouds
+    run.report("sample", 0.0)
+    t0 = time.perf_counter()
+    sample = sampling.sample_surface(part, run.params.points, seed=run.params.seed)
+    tree = build_tree(part.mesh.vertices, part.mesh.faces)
+    run.timings["sample"] = time.perf_counter() - t0
+    run.report("sample", 1.0)
+    return _Surface(sample.points, sample.normals, float(sample.spacing), float(sample.min_spacing), tree)
+
+
+def _seal(run: _Run, surface: _Surface) -> _Sealed:
+    """The candidates (every point, its approaches), then criteria seal and tilt."""
+    run.report("pairs", 0.0)
+    t0 = time.perf_counter()
+    pts, tree = surface.points, surface.tree
+    approach = suction_candidates(surface.normals, run.params.max_tilt_deg)
+    point = np.repeat(np.arange(len(pts), dtype=np.int64), len(approach) // max(len(pts), 1))
+    rule = _seal_rule(run.spec)
+    sealed = seal_kernel(SealPart(tree.record(), tree.normals), pts[point], approach, rule)
+    counts = {name: int(np.count_nonzero(sealed.status == code)) for code, name in REASONS.items()}
+    s = _Survivors(point, approach, sealed.strain, sealed.tilt, sealed.depth_min).keep(sealed.status == PASS)
+    rejected_seal = len(point) - len(s)
+    rejected_tilt = 0
+    if run.params.max_tilt_deg is not None:
+        within = s.tilt <= math.radians(run.params.max_tilt_deg) + SUCTION.tilt_slack
+        rejected_tilt = len(s) - int(np.count_nonzero(within))
+        s = s.keep(within)
+    run.timings["seal"] = time.perf_counter() - t0
+    run.report("pairs", 0.5)
+    return _Sealed(len(point), s, rejected_seal, rejected_tilt, counts, rule)
+
+
+def _hold(run: _Run, loaded: _Loaded, surface: _Surface, s: _Survivors) -> _Held:
+    """Criterion hold, with the part's mass (`hold` "off" or no mass: every candidate stays)."""
+    t0 = time.perf_counter()
+    params, spec = run.params, run.spec
+    if params.hold == "off" or loaded.mass is None:
+        run.timings["hold"] = time.perf_counter() - t0
+        run.report("pairs", 1.0)
+        return _Held(s, False, 0, None, None)
+    load = params.safety_factor * hold_load(loaded.mass, params.accel)
+    rule = HoldRule(spec.cup_radius, spec.vacuum_force, run.mu, load, loaded.com)
+    held = hold_kernel(surface.points[s.point], s.approach, rule)
+    keep = held.margin >= 1.0
+    diagnosis = None
+    if len(s) and not keep.any():
+        best = int(np.argmax(held.margin))
+        limit = LIMITS[int(held.limit[best])]
+        diagnosis = _hold_diagnosis(float(held.margin[best]), limit, spec, loaded.mass, params)
+    kept = replace(s, margin=held.margin, limit=held.limit).keep(keep)
+    run.timings["hold"] = time.perf_counter() - t0
+    run.report("pairs", 1.0)
+    return _Held(kept, True, len(s) - len(kept), load, diagnosis)
+
+
+def _collide(run: _Run, surface: _Surface, s: _Survivors) -> tuple[_Survivors, np.ndarray]:
+    """Criterion collision: the survivors with a free roll, and their free rolls (n, R)."""
+    run.report("collision", 0.0)
+    t0 = time.perf_counter()
+    crule, body = _collision_rule(run.spec, surface.tree, run.params)
+    free = collision_kernel(surface.tree.record(), surface.points[s.point], s.approach, s.depth_min, crule, body)
+    clear = np.asarray(free.any(axis=1), dtype=bool)
+    run.timings["collision"] = time.perf_counter() - t0
+    run.report("collision", 1.0)
+    return s.keep(clear), free[clear]
+
+
+def _stats(
+    run: _Run, loaded: _Loaded, surface: _Surface, sealed: _Sealed, held: _Held, s: _Survivors
+) -> dict[str, Any]:
+    """The export's stats of the criteria (clustering adds its own)."""
+    params, spec = run.params, run.spec
+    rejected = {
+        "seal": sealed.rejected_seal,
+        "tilt": sealed.rejected_tilt,
+        "hold": held.removed,
+        "collision": len(held.survivors) - len(s),
     }
-    if hold_on:
+    rule = sealed.rule
+    stats: dict[str, Any] = {
+        "points": len(surface.points),
+        "candidates_total": sealed.total,
+        "rejected": rejected,
+        "candidates": len(s),
+        "timings_s": run.timings,
+        "spacing_mean": surface.spacing,
+        "spacing_min": surface.min_spacing,
+        "watertight": bool(loaded.part.watertight),
+        "warnings": list(loaded.part.warnings),
+        "seal": {**sealed.counts, "lip_points": len(rule.lip), "interior_probes": len(rule.inner)},
+    }
+    if held.active:
         stats["hold"] = {
-            "mass_kg": mass,
-            "load_n": load,
+            "mass_kg": loaded.mass,
+            "load_n": held.load,
             "safety_factor": params.safety_factor,
             "vacuum_force_n": spec.vacuum_force,
-            "friction": mu,
-            "center_of_mass": [float(v) for v in com],
+            "friction": run.mu,
+            "center_of_mass": [float(v) for v in loaded.com],
             "min_margin": float(np.min(s.margin)) if len(s) and s.margin is not None else None,
             "limits": {name: int(np.count_nonzero(s.limit == k)) for k, name in enumerate(LIMITS)}
             if s.limit is not None
@@ -285,18 +392,11 @@ def generate_suction(
         }
     elif params.hold != "off":
         stats["warnings"].append("criterion hold is off: it needs the part's mass (mass_kg or density)")
-    if mass_note:
-        stats["warnings"].append(mass_note)
-    if len(cands) == 0:
-        stats["empty_reason"] = _empty_reason(rejected, total, spec, params, seal_counts, hold_diag)
-
-    result = _cluster_and_export(cands, s, part, spec, params, mu, stats, report, started, mass, object_name)
-    result.object["version"] = object_version
-    if recording is not None:
-        from ._recording import record_suction_run
-
-        record_suction_run(recording, result, part=part, sample_points=pts, sample_normals=nrm)
-    return result
+    if loaded.mass_note:
+        stats["warnings"].append(loaded.mass_note)
+    if len(s) == 0:
+        stats["empty_reason"] = _empty_reason(rejected, sealed.total, spec, params, sealed.counts, held.diagnosis)
+    return stats
 
 
 def _check_params(params: Params, options: QualityOptions) -> None:
@@ -375,18 +475,15 @@ def _collision_rule(
 def _cluster_and_export(
     cands: SuctionCandidates,
     s: _Survivors,
-    part: Part,
-    spec: SuctionSpec,
-    params: Params,
-    mu: float,
+    loaded: _Loaded,
+    run: _Run,
     stats: dict[str, Any],
-    report: Progress,
     started: float,
-    mass: float | None,
-    object_name: str | None,
+    name_version: tuple[str | None, int | None],
 ) -> SuctionGraspSet:
     """Two-stage k-medoids (contacts, then signed approaches), the export's grasps best first within each
     translation cluster (the larger hold margin, else the smaller seal strain, then the candidate index)."""
+    params, report = run.params, run.report
     report("cluster", 0.0)
     t0 = time.perf_counter()
     res = clustering.two_stage(cands.midpoints, cands.approach, params.k1, params.k2, seed=params.seed, signed=True)
@@ -409,17 +506,19 @@ def _cluster_and_export(
     stats["coverage"] = coverage(cands.midpoints, cands.approach, medoids).to_json()
     stats["timings_s"]["total"] = time.perf_counter() - started
     report("export", 1.0)
-    obj = {"name": object_name or part.name, "version": None, "sha256": part.sha256, "source_units": part.source_units}
+    part = loaded.part
+    name, version = name_version
+    obj = {"name": name or part.name, "version": version, "sha256": part.sha256, "source_units": part.source_units}
     return SuctionGraspSet(
         object=obj,
-        gripper=spec,
+        gripper=run.spec,
         params=params,
-        friction=mu,
+        friction=run.mu,
         stats=stats,
         grasps=grasps,
         candidates=cands,
         warnings=list(part.warnings),
-        mass_kg=mass,
+        mass_kg=loaded.mass,
     )
 
 
