@@ -81,6 +81,9 @@ __all__ = [
     "SimGripper",
     "SimResult",
     "prepare_part",
+    "mass_properties",
+    "placement_error",
+    "load_schedule",
     "simulate_grasp",
     "simulate_grasps",
     "simulate_perturbed",
@@ -639,11 +642,12 @@ def _surface_points(mesh: trimesh.Trimesh, c: SimConstants, seed: int) -> np.nda
     return np.ascontiguousarray(pts, dtype=np.float64)
 
 
-def _mass_properties(
+def mass_properties(
     mesh: trimesh.Trimesh, density: float | None, mass_kg: float | None
 ) -> tuple[float, np.ndarray, np.ndarray, str | None]:
-    """Mass (kg), centre of mass (3,) and inertia about the centre of mass (3, 3) from the mesh volume, at `density`
-    or scaled to `mass_kg` (uniform material)."""
+    """Mass (kg), centre of mass (3,) object frame and inertia about the centre of mass (3, 3) kg m^2 from the volume
+    of `mesh` (metres), at `density` (kg/m^3) or scaled to `mass_kg` (uniform material; exactly one of the two is
+    given, the caller checks them), and a note when the mesh is not a closed volume (then its convex hull's)."""
     note = None
     body = mesh
     if not (mesh.is_watertight and mesh.volume > 0):
@@ -812,7 +816,7 @@ def prepare_part(
     if not positive(force):
         raise InvalidParameterError(f"grip_force must be a positive number (N), got {force!r}", field="grip_force")
     mu = spec.friction if friction is None else float(friction)
-    mass, com, inertia, mass_note = _mass_properties(
+    mass, com, inertia, mass_note = mass_properties(
         mesh, None if density is None else float(density), None if mass_kg is None else float(mass_kg)
     )
     return _assemble(mesh, spec, mu, (mass, com, inertia), float(force), constants, seed, mass_note=mass_note)
@@ -883,6 +887,52 @@ def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     return R
 
 
+def placement_error(rng: np.random.Generator, c: SimConstants = SIM) -> tuple[np.ndarray, np.ndarray]:
+    """A seeded placement error of the part, as a real robot's pose error: a rotation (3, 3) about a random axis by
+    up to `c.pose_noise_deg` and a translation (3,) of up to `c.pose_noise` (m) per axis, drawn from `rng` in this
+    order (axis, angle, translation). The part's pose in the gripper's frame becomes `R_err @ R, R_err @ p + t_err`."""
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    R_err = _rotation(axis, math.radians(c.pose_noise_deg) * rng.uniform(-1.0, 1.0))
+    t_err = rng.uniform(-1.0, 1.0, size=3) * c.pose_noise
+    return R_err, t_err
+
+
+def load_schedule(c: SimConstants, p: Perturbation, dt: float) -> Iterator[np.ndarray]:
+    """The acceleration (3,) m/s^2, grasp frame, that the part feels in each interval of `dt` seconds after the grasp
+    is made: gravity minus the gripper's acceleration (the part's load is its mass times this, at its centre of mass).
+
+    The lift (gravity along +Z plus `c.lift_acceleration` ramped up over `c.lift_time`), a hold at rest
+    (`c.hold_time`), under a perturbation whose gravity is not +Z the turn (gravity swings to `p.gravity` about a
+    fixed axis over `c.turn_time` per 90 degrees) and another hold, then one sine period (`c.shake_frequency`) of
+    `c.shake_acceleration` along each of `c.shake_directions` (or the perturbation's shake)."""
+    g = np.array([0.0, 0.0, c.gravity])
+    n_ramp = max(1, int(round(c.lift_time / dt)))
+    for k in range(n_ramp):  # lifting along -Z with a growing acceleration loads the part along +Z
+        yield g + np.array([0.0, 0.0, c.lift_acceleration]) * (k + 1) / n_ramp
+    n_hold = int(round(c.hold_time / dt))
+    for _ in range(n_hold):
+        yield g
+    target = np.asarray(p.gravity, dtype=np.float64)
+    angle = math.acos(min(1.0, max(-1.0, float(target[2]))))
+    if angle > 1e-6:  # the robot turns the part: gravity swings from +Z to the target about a fixed axis
+        axis = np.cross([0.0, 0.0, 1.0], target)
+        axis = np.array([1.0, 0.0, 0.0]) if np.linalg.norm(axis) < 1e-9 else axis / np.linalg.norm(axis)
+        n_turn = max(1, int(round(c.turn_time * angle / (math.pi / 2) / dt)))
+        for k in range(n_turn):
+            yield _rotation(axis, angle * (k + 1) / n_turn) @ g
+        g = c.gravity * target
+        for _ in range(n_hold):
+            yield g
+    accel = c.shake_acceleration if p.shake_acceleration is None else p.shake_acceleration
+    directions = c.shake_directions if p.shake_directions is None else p.shake_directions
+    n_shake = max(1, int(round(1.0 / c.shake_frequency / dt)))
+    for v in directions:
+        u = np.asarray(v, dtype=np.float64) / np.linalg.norm(v)
+        for k in range(n_shake):
+            yield g - u * (accel * math.sin(2 * math.pi * (k + 0.5) / n_shake))
+
+
 class _Grasp:
     """The state of one simulated grasp on its own MjData."""
 
@@ -917,10 +967,7 @@ class _Grasp:
         T = np.asarray(T_object_grasp, dtype=np.float64)
         # T_grasp_object, with a small seeded placement error
         T_go = np.linalg.inv(T)
-        axis = rng.normal(size=3)
-        axis /= np.linalg.norm(axis)
-        R_err = _rotation(axis, math.radians(self.c.pose_noise_deg) * rng.uniform(-1.0, 1.0))
-        t_err = rng.uniform(-1.0, 1.0, size=3) * self.c.pose_noise
+        R_err, t_err = placement_error(rng, self.c)
         self.R0 = R_err @ T_go[:3, :3]
         self.p0 = R_err @ T_go[:3, 3] + t_err
         self.midpoint_object = T[:3, 3].copy()  # the contact midpoint in the object frame
@@ -1071,7 +1118,7 @@ class _Grasp:
         mid_ref = R_ref @ self.midpoint_object + p_ref
         slip = rot = lost = 0.0
         dt = c.timestep * c.check_steps
-        for a in self._loads(dt):
+        for a in load_schedule(c, self.p, dt):
             # the load is constant over one check interval (a few ms, short against the shake period)
             d.xfrc_applied[self.part_body, :3] = self.mass * a
             mj.mj_step(m, d, nstep=c.check_steps)
@@ -1086,35 +1133,6 @@ class _Grasp:
         if slip > c.slip_limit or rot > c.rotation_limit_deg:
             return SimResult(False, "slipped", slip * 1e3, rot, contacts, bearing_gap_mm=gap, refinements=refined)
         return SimResult(True, None, slip * 1e3, rot, contacts, bearing_gap_mm=gap, refinements=refined)
-
-    def _loads(self, dt: float) -> Iterator[np.ndarray]:
-        """Acceleration felt by the part (gravity minus the gripper's acceleration), grasp frame, per interval."""
-        c, p = self.c, self.p
-        g = np.array([0.0, 0.0, c.gravity])
-        n_ramp = max(1, int(round(c.lift_time / dt)))
-        for k in range(n_ramp):  # lifting along -Z with a growing acceleration loads the part along +Z
-            yield g + np.array([0.0, 0.0, c.lift_acceleration]) * (k + 1) / n_ramp
-        n_hold = int(round(c.hold_time / dt))
-        for _ in range(n_hold):
-            yield g
-        target = np.asarray(p.gravity, dtype=np.float64)
-        angle = math.acos(min(1.0, max(-1.0, float(target[2]))))
-        if angle > 1e-6:  # the robot turns the part: gravity swings from +Z to the target about a fixed axis
-            axis = np.cross([0.0, 0.0, 1.0], target)
-            axis = np.array([1.0, 0.0, 0.0]) if np.linalg.norm(axis) < 1e-9 else axis / np.linalg.norm(axis)
-            n_turn = max(1, int(round(c.turn_time * angle / (math.pi / 2) / dt)))
-            for k in range(n_turn):
-                yield _rotation(axis, angle * (k + 1) / n_turn) @ g
-            g = c.gravity * target
-            for _ in range(n_hold):
-                yield g
-        accel = c.shake_acceleration if p.shake_acceleration is None else p.shake_acceleration
-        directions = c.shake_directions if p.shake_directions is None else p.shake_directions
-        n_shake = max(1, int(round(1.0 / c.shake_frequency / dt)))
-        for v in directions:
-            u = np.asarray(v, dtype=np.float64) / np.linalg.norm(v)
-            for k in range(n_shake):
-                yield g - u * (accel * math.sin(2 * math.pi * (k + 0.5) / n_shake))
 
 
 def simulate_grasp(
