@@ -291,7 +291,7 @@ def test_seal_equals_a_brute_force_evaluation_on_random_candidates(name):
     tilt = rng.normal(scale=0.12, size=(300, 3))
     app = -mesh.face_normals[faces] + tilt
     app /= np.linalg.norm(app, axis=1, keepdims=True)
-    got = judge_cups(mesh, SPEC, pts, app).seal
+    got = judge_cups(mesh, SPEC, pts, app, position_tolerance=0.0).seal  # the seal where the cup lies
     want = np.array([_reference_seal(mesh, SPEC, p, a) for p, a in zip(pts, app, strict=True)])
     # the kernel names the failure of the first lip probe it tests; the verdict pass / fail is the model's
     np.testing.assert_array_equal(got == "pass", want == "pass")
@@ -331,3 +331,20 @@ def _pot() -> trimesh.Trimesh:
     outer = [(R * math.cos(t), R * math.sin(t)) for t in np.linspace(-math.pi / 2, math.asin(top / R), 40)]
     profile = [(0.0, -R), *outer[1:], (pocket, top), (pocket, floor), (0.0, floor)]
     return trimesh.creation.revolve(np.array(profile), sections=96)
+
+
+def test_a_cup_that_seals_only_where_it_lies_fails_within_the_position_tolerance():
+    """A lip 0.5 mm inside an edge seals where it lies, but not when the robot places it 1 mm off (the default
+    position tolerance): `position`. 5 mm inside, it seals anywhere within the tolerance; generate() counts the
+    position failures under seal."""
+    block = trimesh.creation.box((0.1, 0.1, 0.04))
+    near = (0.05 - 0.015 - 0.0005, 0, 0.02)
+    assert _judge(block, near, DOWN, position_tolerance=0.0).seal[0] == "pass"
+    assert _judge(block, near, DOWN).seal[0] == "position"
+    assert _judge(block, near, DOWN, position_tolerance=0.0004).seal[0] == "pass"
+    assert _judge(block, (0.03, 0, 0.02), DOWN).seal[0] == "pass"
+    gs = graspgen.generate(block, SPEC, units="m", points=1500)
+    assert gs.stats["seal"]["position"] > 0
+    x = np.abs(gs.candidates.contacts[:, 0, :2]).max(axis=1)
+    top = gs.candidates.approach[:, 2] < -0.99
+    assert x[top].max() <= 0.05 - 0.015 - 0.001 + 1e-4  # every cup on the top face seals 1 mm further out
