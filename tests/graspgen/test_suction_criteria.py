@@ -16,18 +16,8 @@ import graspgen
 from graspgen import InvalidMeshError, InvalidParameterError, SuctionSpec
 from graspgen.example_grippers import box, prism, stl_bytes
 from graspgen.suction import SUCTION, judge_cups
+from tests.grippers import CUP
 
-CUP = {
-    "name": "cup-30",
-    "kind": "suction",
-    "cup_radius": 0.015,
-    "cup_height": 0.02,
-    "max_strain": 0.1,
-    "vacuum": 60000,
-    "friction": 0.5,
-    "tool": {"radius": 0.012, "length": 0.12},
-    "pregrasp_clearance": 0.03,
-}
 SPEC = SuctionSpec.from_dict(CUP)
 DOWN = (0.0, 0.0, -1.0)
 

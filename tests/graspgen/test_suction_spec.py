@@ -11,19 +11,9 @@ import pytest
 
 from graspgen import GripperSpec, InvalidGripperError, SuctionSpec, load_gripper
 from graspgen.example_grippers import box, stl_bytes
+from tests.grippers import CUP
 
 REPO = Path(__file__).resolve().parents[2]
-CUP = {
-    "name": "cup-30",
-    "kind": "suction",
-    "cup_radius": 0.015,
-    "cup_height": 0.02,
-    "max_strain": 0.1,
-    "vacuum": 60000,
-    "friction": 0.5,
-    "tool": {"radius": 0.012, "length": 0.12},
-    "pregrasp_clearance": 0.03,
-}
 BODY = box((-20, -20, -150), (20, 20, -20))  # mm: a square housing behind a 20 mm cup
 
 
