@@ -38,13 +38,14 @@ from scipy.sparse import csgraph
 from scipy.spatial import cKDTree
 from trimesh.exchange.ply import load_ply
 
-from .errors import InvalidMeshError
+from .errors import InvalidMeshError, InvalidUnitsError
 from .limits import MAX_DECODED_BYTES, check_declared, read_npz
 from .units import UNIT_SCALE, extents_under_each_unit, to_metres, to_metres_scale
 
 __all__ = [
     "Part",
     "load_part",
+    "as_part",
     "load_solid",
     "read_raw_extents",
     "estimate_normals",
@@ -139,6 +140,16 @@ def load_part(
     if raw.faces is None:
         return _point_cloud_part(raw, scale, part_name, source_units)
     return _mesh_part(raw, scale, part_name, source_units)
+
+
+def as_part(source: Part | str | os.PathLike[str] | trimesh.Trimesh, *, units: str | None, name: str | None) -> Part:
+    """`source` as it is when it is a Part already, else loaded by load_part in `units` (required then:
+    InvalidUnitsError without them), named `name`: how generate() takes its part, for either gripper kind."""
+    if isinstance(source, Part):
+        return source
+    if units is None:
+        raise InvalidUnitsError("units are required (mm, cm, m or in)", field="units")
+    return load_part(source, units=units, name=name)
 
 
 def load_solid(

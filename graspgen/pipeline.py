@@ -17,13 +17,13 @@ from . import antipodal, clustering, libm, quality, sampling
 from . import collision as _collision
 from . import hold as _hold
 from .coverage import coverage
-from .errors import InvalidMeshError, InvalidParameterError, InvalidUnitsError
+from .errors import InvalidMeshError, InvalidParameterError
 from .export import Candidates, GraspSet
 from .gripper import KIND as PARALLEL
 from .gripper import GripperSpec
 from .kinds import check_params_for_kind, gripper_from_dict
 from .params import Params, QualityOptions, from_keywords, keyword_parameters
-from .parts import Part, load_part
+from .parts import Part, as_part, load_part
 from .seating import SEAT_TRIES, Seated, SeatHold, SeatJudge, nearest_members
 from .suction import KIND as SUCTION
 from .suction import SuctionCandidates, SuctionGraspSet, SuctionSpec, generate_suction, recluster_suction
@@ -297,12 +297,7 @@ def _load(
 ) -> _Loaded:
     run.report("load", 0.0)
     t0 = time.perf_counter()
-    if isinstance(mesh_or_path, Part):
-        part = mesh_or_path
-    else:
-        if units is None:
-            raise InvalidUnitsError("units are required (mm, cm, m or in)", field="units")
-        part = load_part(mesh_or_path, units=units, name=object_name)
+    part = as_part(mesh_or_path, units=units, name=object_name)
     run.timings["load"] = time.perf_counter() - t0
     mass, mass_note = _hold.part_mass(part, run.params.mass_kg, run.params.density)
     if run.options.validate:

@@ -24,10 +24,10 @@ import trimesh
 from .. import clustering, sampling
 from ..collision import MeshTree, TriangleTree, build_tree, mesh_solid
 from ..coverage import coverage
-from ..errors import InvalidCandidatesError, InvalidMeshError, InvalidParameterError, InvalidUnitsError
+from ..errors import InvalidCandidatesError, InvalidMeshError, InvalidParameterError
 from ..hold import hold_load, part_mass
 from ..params import Params, QualityOptions
-from ..parts import Part, load_part
+from ..parts import Part, as_part
 from ..quality import center_of_mass
 from ..transforms import approach_basis, choose_roll, roll_angles_rad, suction_frames
 from ._collision import CollisionRule, body_frame, collision_kernel
@@ -376,12 +376,7 @@ def _load(
 ) -> _Loaded:
     run.report("load", 0.0)
     t0 = time.perf_counter()
-    if isinstance(mesh_or_path, Part):
-        part = mesh_or_path
-    else:
-        if units is None:
-            raise InvalidUnitsError("units are required (mm, cm, m or in)", field="units")
-        part = load_part(mesh_or_path, units=units, name=name)
+    part = as_part(mesh_or_path, units=units, name=name)
     if part.mesh is None:
         raise InvalidMeshError(
             "a suction cup's seal is judged on the part's triangles, and a point cloud has none: give the part as a "
