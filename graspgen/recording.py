@@ -18,7 +18,14 @@ if TYPE_CHECKING:  # pragma: no cover
 
     from .export import GraspSet
 
-__all__ = ["record_run", "write_recording", "MAX_LOGGED_CANDIDATES", "cluster_colours", "SIM_COLOURS"]
+__all__ = [
+    "record_run",
+    "write_recording",
+    "log_sample_and_candidates",
+    "MAX_LOGGED_CANDIDATES",
+    "cluster_colours",
+    "SIM_COLOURS",
+]
 
 #: candidate midpoints beyond this many are thinned (evenly by index) to keep recordings small
 MAX_LOGGED_CANDIDATES = 200_000
@@ -136,6 +143,32 @@ def _log_coverage(stream: rr.RecordingStream, stats: dict[str, Any]) -> None:
     stream.log("stats/coverage", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN), static=True)
 
 
+def log_sample_and_candidates(
+    stream: rr.RecordingStream, points: np.ndarray | None, normals: np.ndarray | None, cands: Any, path: str
+) -> None:
+    """The sampled surface (`points`, `normals` (k, 3), static) and up to MAX_LOGGED_CANDIDATES of the candidates'
+    `midpoints` (evenly spread over them) at `path`, coloured by translation cluster: what a run's recording shows
+    for either gripper kind (`cands`: Candidates or suction's SuctionCandidates)."""
+    import rerun as rr
+
+    if points is not None and len(points):
+        stream.log("part/points", rr.Points3D(points, radii=0.0004, colors=[170, 170, 170]), static=True)
+        if normals is not None:
+            stream.log(
+                "part/normals", rr.Arrows3D(origins=points, vectors=normals * 0.003, colors=[90, 140, 220]), static=True
+            )
+    if len(cands):
+        idx = np.arange(len(cands))
+        if len(idx) > MAX_LOGGED_CANDIDATES:
+            idx = np.linspace(0, len(cands) - 1, MAX_LOGGED_CANDIDATES).astype(np.int64)
+        labels = cands.labels[idx, 0]
+        stream.log(
+            path,
+            rr.Points3D(cands.midpoints[idx], radii=0.0003, colors=cluster_colours(labels), class_ids=labels),
+            static=True,
+        )
+
+
 def _log(
     stream: rr.RecordingStream,
     result: GraspSet,
@@ -146,23 +179,7 @@ def _log(
     import rerun as rr
 
     stream.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-    if points is not None and len(points):
-        stream.log("part/points", rr.Points3D(points, radii=0.0004, colors=[170, 170, 170]), static=True)
-        if normals is not None:
-            stream.log(
-                "part/normals", rr.Arrows3D(origins=points, vectors=normals * 0.003, colors=[90, 140, 220]), static=True
-            )
-    cands = result.candidates
-    if len(cands):
-        idx = np.arange(len(cands))
-        if len(idx) > MAX_LOGGED_CANDIDATES:
-            idx = np.linspace(0, len(cands) - 1, MAX_LOGGED_CANDIDATES).astype(np.int64)
-        labels = cands.labels[idx, 0]
-        stream.log(
-            "candidates/midpoints",
-            rr.Points3D(cands.midpoints[idx], radii=0.0003, colors=cluster_colours(labels), class_ids=labels),
-            static=True,
-        )
+    log_sample_and_candidates(stream, points, normals, result.candidates, "candidates/midpoints")
     if result.gripper.geometry is not None:
         _log_gripper_meshes(
             stream, "grasps/grippers", result, [cluster_colours(np.array([g["cluster"][0]]))[0] for g in result.grasps]

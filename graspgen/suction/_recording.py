@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import trimesh
 
-from ..recording import MAX_LOGGED_CANDIDATES, cluster_colours, write_recording
+from ..recording import cluster_colours, log_sample_and_candidates, write_recording
 from ._export import SuctionGraspSet
 from ._spec import SuctionSpec
 
@@ -75,23 +75,7 @@ def _log(
             ),
             static=True,
         )
-    if points is not None and len(points):
-        stream.log("part/points", rr.Points3D(points, radii=0.0004, colors=[170, 170, 170]), static=True)
-        if normals is not None:
-            stream.log(
-                "part/normals", rr.Arrows3D(origins=points, vectors=normals * 0.003, colors=[90, 140, 220]), static=True
-            )
-    cands = result.candidates
-    if len(cands):
-        idx = np.arange(len(cands))
-        if len(idx) > MAX_LOGGED_CANDIDATES:
-            idx = np.linspace(0, len(cands) - 1, MAX_LOGGED_CANDIDATES).astype(np.int64)
-        labels = cands.labels[idx, 0]
-        stream.log(
-            "candidates/contacts",
-            rr.Points3D(cands.midpoints[idx], radii=0.0003, colors=cluster_colours(labels), class_ids=labels),
-            static=True,
-        )
+    log_sample_and_candidates(stream, points, normals, result.candidates, "candidates/contacts")
     verts, faces, cols = [], [], []
     offset = 0
     solids = cup_meshes(result.gripper)
