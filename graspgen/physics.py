@@ -70,6 +70,7 @@ from .gripper import GripperSpec
 from .meshsweep import SweptMesh
 
 __all__ = [
+    "shake_directions_across",
     "SimConstants",
     "SIM",
     "DEFAULT_DENSITY",
@@ -238,6 +239,22 @@ class Perturbation:
 NOMINAL = Perturbation()
 
 
+def shake_directions_across(
+    gravity: tuple[float, ...], angle: float
+) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """Two perpendicular unit directions across the unit `gravity` (3,), turned by `angle` (rad) about it from
+    (gravity x helper, gravity x that), the helper +X unless gravity lies along X (then +Y): the shake of the
+    perturbation sets' seeded mixture, which draws the angle."""
+    g = np.asarray(gravity, dtype=np.float64)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(g[0]) < 0.5 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(g, helper)
+    u /= np.linalg.norm(u)
+    v = np.cross(g, u)
+    first = math.cos(angle) * u + math.sin(angle) * v
+    second = -math.sin(angle) * u + math.cos(angle) * v
+    return (float(first[0]), float(first[1]), float(first[2])), (float(second[0]), float(second[1]), float(second[2]))
+
+
 def perturbation_set(seed: int = 0) -> tuple[Perturbation, ...]:
     """The standard perturbations (11), each changing the nominal simulation in one way, plus one seeded mixture:
 
@@ -261,12 +278,7 @@ def perturbation_set(seed: int = 0) -> tuple[Perturbation, ...]:
     members.append(Perturbation("lateral shake 1 g", shake_acceleration=9.81, shake_directions=lateral))
     g_key = str(rng.choice(list(_AXES)))
     g = np.asarray(_AXES[g_key])
-    helper = np.array([1.0, 0.0, 0.0]) if abs(g[0]) < 0.5 else np.array([0.0, 1.0, 0.0])
-    u = np.cross(g, helper)
-    u /= np.linalg.norm(u)
-    v = np.cross(g, u)
-    b = float(rng.uniform(0.0, math.pi))
-    shake = (tuple(math.cos(b) * u + math.sin(b) * v), tuple(-math.sin(b) * u + math.cos(b) * v))
+    shake = shake_directions_across(tuple(g), float(rng.uniform(0.0, math.pi)))
     ms, mu = float(rng.uniform(0.5, 1.5)), float(rng.uniform(0.4, 0.6))
     members.append(
         Perturbation(

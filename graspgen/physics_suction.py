@@ -50,7 +50,15 @@ import numpy.typing as npt
 import trimesh
 
 from .errors import InvalidMeshError, InvalidParameterError
-from .physics import SIM, Perturbation, SimConstants, load_schedule, mass_properties, placement_error
+from .physics import (
+    SIM,
+    Perturbation,
+    SimConstants,
+    load_schedule,
+    mass_properties,
+    placement_error,
+    shake_directions_across,
+)
 
 __all__ = [
     "SuctionSimConstants",
@@ -221,12 +229,7 @@ def suction_perturbation_set(seed: int = 0) -> tuple[SuctionPerturbation, ...]:
     members.append(SuctionPerturbation("lateral shake 1 g", shake_acceleration=9.81, shake_directions=lateral))
     g_key = str(rng.choice(list(_AXES)))
     g = np.asarray(_AXES[g_key])
-    helper = np.array([1.0, 0.0, 0.0]) if abs(g[0]) < 0.5 else np.array([0.0, 1.0, 0.0])
-    u = np.cross(g, helper)
-    u /= np.linalg.norm(u)
-    v = np.cross(g, u)
-    b = float(rng.uniform(0.0, math.pi))
-    shake = (tuple(math.cos(b) * u + math.sin(b) * v), tuple(-math.sin(b) * u + math.cos(b) * v))
+    shake = shake_directions_across(tuple(g), float(rng.uniform(0.0, math.pi)))
     ms, vs, mu = float(rng.uniform(0.5, 1.5)), float(rng.uniform(0.7, 1.0)), float(rng.uniform(0.3, 0.6))
     members.append(
         SuctionPerturbation(
