@@ -184,7 +184,7 @@ def generate(
         "sha256": part.sha256,
         "source_units": part.source_units,
     }
-    extras = _Extras(options, part, loaded.mass_kg, (surface.points, surface.normals))
+    extras = _Extras(options, part, loaded.mass_kg, (surface.points, surface.normals), surface.tree)
     params = replace(params, hold="any" if held.active else "off")
     result = _cluster_and_export(cands, obj, spec, params, mu, stats, report, run.started, list(part.warnings), extras)
     if recording is not None:
@@ -856,9 +856,7 @@ def _cluster_and_export(
         stats["timings_s"]["validate"] = time.perf_counter() - t0
     if judge is not None:  # a grasp the validation repaired with another member: its seat for the export
         for m in medoids:
-            if int(m) not in seated and (
-                s := judge.seat(_poses(cands, medoids[medoids == m])[0], float(cands.widths[m]))
-            ):
+            if int(m) not in seated and (s := judge.seat(_poses(cands, np.array([m]))[0], float(cands.widths[m]))):
                 seated[int(m)] = s
     # best first within each translation cluster: (validated grasps first,) larger quality score, then candidate
     # index; the score needs only the exported grasps' terms. Without the part (recluster without `mesh` of
@@ -944,7 +942,7 @@ def _seat_judge(spec: GripperSpec, extras: _Extras, mu: float, params: Params) -
     if params.hold != "off" and extras.mass_kg is not None and spec.grip_force is not None:
         com = quality.center_of_mass(part.mesh, part.points)
         hold = SeatHold(com, _hold.hold_load(extras.mass_kg, params.accel), spec.grip_force, mu)
-    tree = _collision.build_tree(part.mesh.vertices, part.mesh.faces)
+    tree = extras.tree if extras.tree is not None else _collision.build_tree(part.mesh.vertices, part.mesh.faces)
     half = quality.half_angle_deg(mu, params.safety_factor)
     return SeatJudge(tree, spec.solids(), half, hold, _collision.triangle_bounds(tree))
 
@@ -1083,12 +1081,14 @@ def _empty_reason(
 @dataclass(frozen=True)
 class _Extras:
     """The quality options and what a run resolved for them: the part (to score and simulate), its mass (kg) for
-    the validation, and its sampled surface (points, normals) for the flatness term when the run has it."""
+    the validation, its sampled surface (points, normals) for the flatness term when the run has it, and the part's
+    triangle tree when the run built one (the seats of a gripper from CAD walk it)."""
 
     options: QualityOptions = QualityOptions()
     part: Part | None = None
     mass_kg: float | None = None
     surface: tuple[np.ndarray, np.ndarray] | None = None
+    tree: _collision.MeshTree | None = None
 
 
 def _mean(values: np.ndarray) -> float | None:

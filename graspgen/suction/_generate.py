@@ -143,12 +143,13 @@ def judge_cups(
     A = np.asarray(approach, dtype=np.float64).reshape(-1, 3)
     A = np.ascontiguousarray(A / np.linalg.norm(A, axis=1, keepdims=True))
     tree = build_tree(mesh.vertices, mesh.faces)
-    sealed = seal_kernel(SealPart(tree.record(), tree.normals), P, A, _seal_rule(spec))
+    seal_part, seal_rule = SealPart(tree.record(), tree.normals), _seal_rule(spec)
+    sealed = seal_kernel(seal_part, P, A, seal_rule)
     names = np.array(["pass", *REASONS.values(), "position"])
     seal = names[sealed.status]
     if position_tolerance > 0.0:
         ok = np.flatnonzero(sealed.status == PASS)
-        steady = seal_within(SealPart(tree.record(), tree.normals), P[ok], A[ok], _seal_rule(spec), position_tolerance)
+        steady = seal_within(seal_part, P[ok], A[ok], seal_rule, position_tolerance)
         seal[ok[~steady]] = "position"
     margin = limit = None
     if mass_kg is not None:
@@ -409,12 +410,13 @@ def _seal(run: _Run, surface: _Surface) -> _Sealed:
     approach = suction_candidates(surface.normals, run.params.max_tilt_deg)
     point = np.repeat(np.arange(len(pts), dtype=np.int64), len(approach) // max(len(pts), 1))
     rule = _seal_rule(run.spec)
-    sealed = seal_kernel(SealPart(tree.record(), tree.normals), pts[point], approach, rule)
+    seal_part = SealPart(tree.record(), tree.normals)
+    sealed = seal_kernel(seal_part, pts[point], approach, rule)
     counts = {name: int(np.count_nonzero(sealed.status == code)) for code, name in REASONS.items()}
     s = _Survivors(point, approach, sealed.strain, sealed.tilt, sealed.depth_min).keep(sealed.status == PASS)
     tol = run.params.position_tolerance
     if tol > 0.0 and len(s):
-        steady = seal_within(SealPart(tree.record(), tree.normals), pts[s.point], s.approach, rule, tol)
+        steady = seal_within(seal_part, pts[s.point], s.approach, rule, tol)
         counts["position"] = int(np.count_nonzero(~steady))
         s = s.keep(steady)
     rejected_seal = len(point) - len(s)
