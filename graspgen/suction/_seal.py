@@ -267,17 +267,20 @@ def _to_cup_frame(
 @njit(cache=True, inline="always", error_model="numpy")
 def _depth_at(L: np.ndarray, x: float, y: float, tiny: float) -> float:
     """The depth of the triangle L (3, 3) (cup frame) at (x, y), or inf when (x, y) lies outside it (2D edge
-    functions, closed) or it is seen edge-on (twice its area in the plane at most `tiny`)."""
+    functions, closed, within the band `tiny`) or it is seen edge-on (twice its area in the plane at most `tiny`)."""
     area2 = (L[1, 0] - L[0, 0]) * (L[2, 1] - L[0, 1]) - (L[1, 1] - L[0, 1]) * (L[2, 0] - L[0, 0])
     if abs(area2) <= tiny:
         return np.inf
     e0 = (L[2, 0] - L[1, 0]) * (y - L[1, 1]) - (L[2, 1] - L[1, 1]) * (x - L[1, 0])
     e1 = (L[0, 0] - L[2, 0]) * (y - L[2, 1]) - (L[0, 1] - L[2, 1]) * (x - L[2, 0])
     e2 = (L[1, 0] - L[0, 0]) * (y - L[0, 1]) - (L[1, 1] - L[0, 1]) * (x - L[0, 0])
+    # closed, with a band of `tiny` (in the edge functions' units, twice an area): a probe on an edge shared by two
+    # triangles (the spokes of a round part's face meet the lip's probes exactly) then lies in both, whatever the
+    # rounding
     if area2 > 0.0:
-        if e0 < 0.0 or e1 < 0.0 or e2 < 0.0:
+        if e0 < -tiny or e1 < -tiny or e2 < -tiny:
             return np.inf
-    elif e0 > 0.0 or e1 > 0.0 or e2 > 0.0:
+    elif e0 > tiny or e1 > tiny or e2 > tiny:
         return np.inf
     d: float = (e0 * L[0, 2] + e1 * L[1, 2] + e2 * L[2, 2]) / area2
     return d
