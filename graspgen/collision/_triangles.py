@@ -215,7 +215,7 @@ def _walk(
     tree: TriangleTree,
     regions: Regions,
     rolls: Rolls,
-    solids: tuple[TriangleTree, TriangleTree, TriangleTree] | None,
+    solids: tuple[TriangleTree, TriangleTree, TriangleTree],
     g: float,
     work: MeshWork,
 ) -> np.uint64:
@@ -356,7 +356,7 @@ def _walk(
                         w[c, 2] = -v[c, 1] * sk + v[c, 2] * ck
                     if tri_box(w, boxes_c[r], boxes_e[r]):
                         sol = int(rows[r, SOLID])
-                        if solids is None or sol < 0:
+                        if sol < 0:
                             blocked |= bit
                         else:
                             moves = int(rows[r, MOVES])
@@ -385,20 +385,20 @@ def region_boxes(regions: Regions, rx: np.ndarray, boxes_c: np.ndarray, boxes_e:
 
 @njit(cache=True, error_model="numpy")
 def _mesh_thread(
-    t: int,
+    t: np.int64,
     nthreads: int,
     cands: Candidates,
     free: np.ndarray,
     tree: TriangleTree,
     regions: Regions,
     rolls: Rolls,
-    solids: tuple[TriangleTree, TriangleTree, TriangleTree] | None,
+    solids: tuple[TriangleTree, TriangleTree, TriangleTree],
     g: float,
 ) -> None:
     """Thread t's share of the mesh-exact check: chunks t, t + nthreads, ... of the candidates (the work varies
     along the candidates' spatial order, and a static split into one run per thread leaves one thread with most of
     it). Clears in free (n, R) bool every roll at which some triangle of the tree meets some region; `solids`: the
-    mesh solids (left, right, body) or None for a gripper of boxes (the leaf test then compiles without them)."""
+    mesh solids (left, right, body), empty trees for a gripper of boxes (whose regions name no solid)."""
     n = cands.inside.shape[0]
     R = rolls.cos.shape[0]
     nreg = regions.rows.shape[0]
@@ -450,15 +450,6 @@ def _mesh_thread(
 
 @njit(parallel=True, cache=True, error_model="numpy")
 def _mesh_kernel(
-    cands: Candidates, free: np.ndarray, tree: TriangleTree, regions: Regions, rolls: Rolls, g: float, nthreads: int
-) -> None:
-    """The mesh-exact check of a gripper of boxes, over nthreads threads."""
-    for t in prange(nthreads):
-        _mesh_thread(t, nthreads, cands, free, tree, regions, rolls, None, g)
-
-
-@njit(parallel=True, cache=True, error_model="numpy")
-def _mesh_kernel_solids(
     cands: Candidates,
     free: np.ndarray,
     tree: TriangleTree,
@@ -470,10 +461,12 @@ def _mesh_kernel_solids(
     g: float,
     nthreads: int,
 ) -> None:
-    """The mesh-exact check of a gripper from CAD (its solids left, right, body: TriangleTrees), over nthreads
-    threads (numba's parallel loops take flat records: the solids' tuple is made inside)."""
+    """The mesh-exact check over nthreads threads; left, right, body: the gripper's mesh solids (TriangleTrees, empty
+    for a gripper of boxes). numba's parallel loops take flat records, so the solids' tuple is made inside; the
+    thread index is cast to int64 so that the typing pass and the parallel loop (which counts in uint64) call one
+    compiled _mesh_thread."""
     for t in prange(nthreads):
-        _mesh_thread(t, nthreads, cands, free, tree, regions, rolls, (left, right, body), g)
+        _mesh_thread(np.int64(t), nthreads, cands, free, tree, regions, rolls, (left, right, body), g)
 
 
 def mesh_free_rolls(
@@ -527,11 +520,6 @@ def _run(
     g = TOLERANCES.guard * 2.0 * float(np.max(tree.nodes[0, M_H : M_H + 3])) + TOLERANCES.guard_floor
     with numba.parallel_chunksize(1):
         regions = region_table(model)
-        if model.meshes is None:  # boxes only: the kernel compiled without the solids' leaf test
-            _mesh_kernel(cands, out, tree.record(), regions, rolls, g, numba.get_num_threads())
-        else:
-            left, right, body = model.solid_records()
-            _mesh_kernel_solids(
-                cands, out, tree.record(), regions, rolls, left, right, body, g, numba.get_num_threads()
-            )
+        left, right, body = model.solid_records()
+        _mesh_kernel(cands, out, tree.record(), regions, rolls, left, right, body, g, numba.get_num_threads())
     return out

@@ -250,7 +250,8 @@ def _body_rolls(
                 x = c * local[v, 0] + s * local[v, 1]
                 y = -s * local[v, 0] + c * local[v, 1]
                 w[v, 0], w[v, 1], w[v, 2] = -local[v, 2], y, x
-            if tri_meets_solid(w, body, 0, 0.0, rule.sweep, rule.guard, A, solid_stack):
+            # int(0), not 0: numba specialises a callee on a literal argument, and the jaws call it with a variable
+            if tri_meets_solid(w, body, int(0), 0.0, rule.sweep, rule.guard, A, solid_stack):  # noqa: UP018
                 free[k] = False
                 left -= 1
                 if left == 0:
