@@ -62,11 +62,12 @@ def load_gripper(
     return gripper_from_dict(data_or_path, files=files, base_dir=base_dir)
 
 
-def check_params_for_kind(kind: str, params: Params, options: QualityOptions) -> None:
+def check_params_for_kind(kind: str, params: Params, options: QualityOptions, *, recluster: bool = False) -> None:
     """InvalidParameterError naming the field when a run parameter or option has no meaning for the gripper `kind`
-    (refused, not ignored): generate() calls it when a run starts, the service when a job is submitted."""
+    (refused, not ignored): generate() and recluster() call it when a run starts, the service when a job is
+    submitted. `recluster`: a new selection from a set's stored candidates (a cluster job)."""
     if kind == SUCTION:
-        check_params(params, options)
+        check_params(params, options, recluster=recluster)
     elif params.max_tilt_deg is not None:
         raise InvalidParameterError(
             "max_tilt_deg is for suction cups: a parallel gripper's approach follows from its contacts",

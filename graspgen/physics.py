@@ -59,7 +59,7 @@ from collections import OrderedDict
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field, replace
-from typing import Any, cast
+from typing import Any, Protocol, TypeVar, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -309,15 +309,29 @@ def validation_set(friction: float) -> tuple[Perturbation, ...]:
     )
 
 
-def first_failures(grid: list[list[SimResult]], members: Sequence[Perturbation]) -> list[SimResult]:
-    """One outcome per grasp of simulate_perturbed's `grid` under `members` (validation_set): the first member's
-    (the nominal) result when the grasp held in all of them, else the result of the first member it failed, named
-    in `SimResult.member`."""
+class _Outcome(Protocol):
+    """A simulated grasp's outcome (SimResult, physics_suction.SuctionSimResult): a dataclass with these fields."""
+
+    @property
+    def success(self) -> bool: ...
+
+    @property
+    def member(self) -> str | None: ...
+
+
+_R = TypeVar("_R", bound=_Outcome)
+
+
+def first_failures(grid: Sequence[Sequence[_R]], members: Sequence[Perturbation]) -> list[_R]:
+    """One outcome per grasp of a simulation `grid` (grasp i under member j, members as simulated: validation_set
+    or physics_suction.suction_validation_set): the first member's (the nominal) result when the grasp held in all
+    of them, else the result of the first member it failed, named in its `member`."""
     names = [p.name for p in members]
     out = []
     for row in grid:
         failed = next((j for j, r in enumerate(row) if not r.success), None)
-        out.append(row[0] if failed is None else replace(row[failed], member=names[failed]))
+        # dataclasses.replace: each outcome type is a dataclass (the protocol names the fields read here)
+        out.append(row[0] if failed is None else cast(_R, replace(cast(Any, row[failed]), member=names[failed])))
     return out
 
 

@@ -68,6 +68,7 @@ __all__ = [
     "SuctionPerturbation",
     "SUCTION_NOMINAL",
     "suction_perturbation_set",
+    "suction_validation_set",
     "SuctionSimPart",
     "SuctionSeal",
     "SuctionSimResult",
@@ -243,6 +244,21 @@ def suction_perturbation_set(seed: int = 0) -> tuple[SuctionPerturbation, ...]:
         )
     )
     return tuple(members)
+
+
+def suction_validation_set(friction: float) -> tuple[SuctionPerturbation, ...]:
+    """What `validate` simulates every suction grasp under: the nominal pick and the ends of the uncertainty a cup's
+    hold depends on most, each alone: the part 50 % heavier (mass x1.5), the pump 30 % weaker (vacuum x0.7), the
+    lip's friction 20 % lower (x0.8 of the run's `friction`), and the load turned across the cup's axis after the
+    pick (gravity along the grasp frame's +X: shear on the lip and a peel moment). A validated cup holds in all
+    five (the jaws' validation_set, for a cup)."""
+    return (
+        SUCTION_NOMINAL,
+        SuctionPerturbation("mass x1.5", mass_scale=1.5),
+        SuctionPerturbation("vacuum x0.7", vacuum_scale=0.7),
+        SuctionPerturbation("friction x0.8", friction=0.8 * float(friction)),
+        SuctionPerturbation("gravity +X", gravity=_AXES["+X"]),
+    )
 
 
 @dataclass

@@ -36,6 +36,7 @@ from ._hold import LIMITS, HoldRule, hold_kernel
 from ._model import SUCTION, SuctionModel, depth_limits, inner_probes, lip_points
 from ._seal import PASS, REASONS, SealPart, SealRule, seal_kernel
 from ._spec import MAX_VACUUM, SuctionSpec
+from ._validate import Validator, check_validation_inputs, suction_validator
 
 __all__ = [
     "generate_suction",
@@ -192,6 +193,19 @@ def generate_suction(
     check_params(params, options)
     run = _Run(spec, params, spec.friction if params.friction is None else params.friction, report, {})
     loaded = _load(run, mesh_or_path, units, object_name)
+    validator = None
+    if options.validate:
+        check_validation_inputs(loaded.mass)
+        assert loaded.mass is not None  # checked
+        validator = suction_validator(
+            loaded.part.surface_mesh(),
+            spec,
+            mass_kg=loaded.mass,
+            friction=run.mu,
+            seed=params.seed,
+            options=options,
+            poses=_poses,
+        )
     surface = _sample(run, loaded.part)
     sealed = _seal(run, surface)
     held = _hold(run, loaded, surface, sealed.survivors)
@@ -223,6 +237,7 @@ def generate_suction(
         _Selection(obj, spec, params, run.mu, loaded.mass, list(part.warnings)),
         report,
         started,
+        validator,
     )
     if recording is not None:
         from ._recording import record_suction_run
@@ -249,8 +264,9 @@ def recluster_suction(
     (`gripper.kind` "suction"), clustered with k1 / k2 / seed: the export a fresh generate_suction of the same part,
     cup and parameters with these k1 / k2 / seed makes (but for stats.timings_s). `gripper`: the spec the set was
     made with, required when it has a body mesh (the export names its file and digest, not its contents); its
-    to_dict() must be the export's `gripper`. `options` as generate's: validate and best-near-medoid selection are
-    refused (check_params)."""
+    to_dict() must be the export's `gripper`. `options` as generate's: best-near-medoid selection is refused
+    (check_params), and so is validate (the simulation needs the part, which the candidates do not hold: generate
+    the set again with validate)."""
     report = progress or _noop
     started = time.perf_counter()
     cands = candidates if isinstance(candidates, SuctionCandidates) else load_suction_candidates(candidates)
@@ -265,7 +281,7 @@ def recluster_suction(
     # the export carries the mass the run resolved (given, or density x volume) beside the density it came from
     mass = old.pop("mass_kg", None)
     params = Params.from_dict({**old, "k1": k1, "k2": k2, "seed": seed, "friction": mu})
-    check_params(params, options or QualityOptions())
+    check_params(params, options or QualityOptions(), recluster=True)
     if len(cands.roll_angles_rad) != params.rolls:
         raise InvalidParameterError("the candidates' roll count differs from the export's params.rolls", field="rolls")
     prev = copy.deepcopy(previous_export.get("stats", {}))
@@ -530,8 +546,16 @@ def _stats(
     return stats
 
 
-def check_params(params: Params, options: QualityOptions) -> None:
-    """The run parameters and options that have no meaning for a suction cup are refused, not ignored."""
+def check_params(params: Params, options: QualityOptions, *, recluster: bool = False) -> None:
+    """The run parameters and options that have no meaning for a suction cup are refused, not ignored; `recluster`:
+    for a new selection from a set's stored candidates, which cannot be validated (the simulation needs the part,
+    and the candidates do not hold it)."""
+    if recluster and options.validate:
+        raise InvalidParameterError(
+            "validating a suction set needs the part, which its candidates do not hold: generate it again with "
+            "validate",
+            field="validate",
+        )
     if params.inside:
         raise InvalidParameterError("inside grasps are for jaws: a suction cup seals on an outer face", field="inside")
     if params.collision != "swept":
@@ -540,8 +564,6 @@ def check_params(params: Params, options: QualityOptions) -> None:
             "mode is for jaws",
             field="collision",
         )
-    if options.validate:
-        raise InvalidParameterError("validation of suction grasps in simulation is not available yet", field="validate")
     if options.select != "medoid":
         raise InvalidParameterError(
             "suction grasps are selected as the clusters' medoids (select 'medoid')", field="select"
@@ -617,12 +639,19 @@ class _Selection:
 
 
 def _cluster_and_export(
-    cands: SuctionCandidates, stats: dict[str, Any], sel: _Selection, report: Progress, started: float
+    cands: SuctionCandidates,
+    stats: dict[str, Any],
+    sel: _Selection,
+    report: Progress,
+    started: float,
+    validator: Validator | None = None,
 ) -> SuctionGraspSet:
     """Two-stage k-medoids (contacts, then signed approaches) with sel.params' k1, k2 and seed, the export's grasps
-    best first within each translation cluster (the larger hold margin, else the smaller seal strain, then the
-    candidate index). A function of the candidates alone: generate_suction and recluster_suction share it, so the
-    same candidates and k1 / k2 / seed give the same grasps."""
+    best first within each translation cluster (validated cups first, then the larger hold margin, else the smaller
+    seal strain, then the candidate index). Without a `validator` a function of the candidates alone:
+    generate_suction and recluster_suction share it, so the same candidates and k1 / k2 / seed give the same
+    grasps. A validator simulates the selected cups and may replace one by another member of its cluster; each
+    grasp then carries its outcome (`sim`)."""
     params = sel.params
     report("cluster", 0.0)
     t0 = time.perf_counter()
@@ -637,12 +666,23 @@ def _cluster_and_export(
     clusters = np.asarray(res.medoid_clusters, dtype=np.int64).reshape(-1, 2)
     sizes = np.asarray(res.cluster_sizes, dtype=np.int64)
     labels = np.asarray(res.labels, dtype=np.int32).reshape(-1, 2)
+    sim = None
+    if validator is not None:
+        t1 = time.perf_counter()
+        medoids, sim = validator(cands, labels, medoids, clusters, stats, report)
+        stats["timings_s"]["validate"] = time.perf_counter() - t1
     key = cands.hold_margin[medoids] if cands.hold_margin is not None else -cands.seal_strain[medoids]
-    order = np.lexsort((medoids, -key, clusters[:, 0])) if len(medoids) else medoids
+    keys = [medoids, -key]
+    if sim is not None:
+        keys.append(np.array([not r.success for r in sim], dtype=bool))
+    order = np.lexsort((*keys, clusters[:, 0])) if len(medoids) else medoids
     medoids, clusters, sizes = medoids[order], clusters[order], sizes[order]
     cands = replace(cands, labels=labels, medoids=medoids)
     stats["export_order"] = "hold_margin" if cands.hold_margin is not None else "seal_strain"
     grasps = _grasps(cands, medoids, clusters, sizes)
+    if sim is not None:
+        for r, g in enumerate(grasps):
+            g["sim"] = sim[order[r]].to_json()
     stats["coverage"] = coverage(cands.midpoints, cands.approach, medoids).to_json()
     stats["timings_s"]["total"] = time.perf_counter() - started
     report("export", 1.0)
@@ -666,8 +706,7 @@ def _grasps(
     run of free rolls (graspgen.transforms.choose_roll)."""
     if len(medoids) == 0:
         return []
-    rolls = np.array([0 if cands.free_rolls[m].all() else choose_roll(cands.free_rolls[m]) for m in medoids])
-    psi = cands.roll_angles_rad[rolls]
+    psi = _rolls(cands, medoids)
     T = suction_frames(cands.contacts[medoids, 0], cands.approach[medoids], psi)
     out = []
     for r, m in enumerate(medoids):
@@ -689,6 +728,18 @@ def _grasps(
             g["hold_limit"] = LIMITS[int(cands.hold_limit[m])]
         out.append(g)
     return out
+
+
+def _rolls(cands: SuctionCandidates, idx: np.ndarray) -> np.ndarray:
+    """(k,) radians: the exported roll of candidates idx: 0 when every roll is free (a round tool), else the middle
+    of the widest run of free rolls (graspgen.transforms.choose_roll)."""
+    rolls = np.array([0 if cands.free_rolls[m].all() else choose_roll(cands.free_rolls[m]) for m in idx], dtype=int)
+    return np.asarray(cands.roll_angles_rad[rolls], dtype=np.float64)
+
+
+def _poses(cands: SuctionCandidates, idx: np.ndarray) -> np.ndarray:
+    """(k, 4, 4): the exported poses (T_object_grasp) of candidates idx."""
+    return suction_frames(cands.contacts[idx, 0], cands.approach[idx], _rolls(cands, idx))
 
 
 def _hold_diagnosis(best: float, limit: str, spec: SuctionSpec, mass: float, params: Params) -> dict[str, Any]:

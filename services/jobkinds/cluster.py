@@ -82,7 +82,7 @@ def resolve(session: Session, body: ClusterJobRequest) -> dict[str, Any]:
         base.pop("mass_kg", None)  # a density for validation replaces the source's mass (one of the two)
     core = Params.from_dict({**base, **given})
     # options the set's gripper kind cannot use (validate, select for a suction set): 422 now, not a failed job
-    check_params_for_kind(kind, core, QualityOptions.split_job(quality)[1])
+    check_params_for_kind(kind, core, QualityOptions.split_job(quality)[1], recluster=True)
     merged = {**core.to_dict(), **quality}
     return {
         "object_version_id": source.object_version_id,

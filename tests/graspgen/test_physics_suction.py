@@ -17,6 +17,7 @@ from graspgen import physics_suction as ps
 from graspgen.errors import InvalidParameterError
 from graspgen.gripper import GripperSpec
 from graspgen.parts import load_part
+from tests.grippers import CUP as EXAMPLE_CUP
 
 #: the contract's example cup: 30 mm, 60 kPa (V = 42.4 N), mu 0.5, 10 % stretch
 CUP = ps.SuctionCup(cup_radius=0.015, cup_height=0.02, vacuum=60_000.0, friction=0.5, max_strain=0.1)
@@ -212,3 +213,46 @@ def test_a_scanned_box_is_held_on_its_largest_face(shared_meshes):
     (row,) = ps.simulate_suction(mesh, frame(contact, -axis)[None], CUP, mass_kg=0.2, perturbations=ALL[:4])
     assert all(r.success for r in row), [r.to_json() for r in row]
     assert math.isfinite(row[0].strain) and row[0].strain < CUP.max_strain
+
+
+# -- generate(validate=True) for a suction cup -------------------------------------------------------------------------
+BAR = trimesh.creation.box((0.3, 0.04, 0.02))
+
+
+def test_validate_simulates_each_exported_cup_and_repairs_one_the_simulation_drops():
+    """A 300 mm bar of 0.3 kg with criterion hold off: cups far from the middle peel off in the simulation, cups near
+    it hold. validate simulates every exported cup under suction_validation_set, replaces one that fails by the
+    nearest member of its cluster that holds, puts each outcome in the grasp (`sim`) and counts them."""
+    import graspgen
+
+    run = {"units": "m", "points": 600, "mass_kg": 0.3, "hold": "off", "k1": 4, "k2": 1, "repair_limit": 30}
+    gs = graspgen.generate(BAR, dict(EXAMPLE_CUP), validate=True, **run)
+    v = gs.stats["validation"]
+    assert v["members"] == [p.name for p in ps.suction_validation_set(0.5)]
+    assert v["tested"] == len(gs.grasps) == 4 and v["succeeded"] == sum(g["sim"]["success"] for g in gs.grasps)
+    assert v["first_pass"]["succeeded"] < v["first_pass"]["tested"] and v["repaired"] >= 1
+    assert v["succeeded"] == v["first_pass"]["succeeded"] + v["repaired"]
+    x = np.array([abs(g["contacts"][0][0]) for g in gs.grasps])
+    ok = np.array([g["sim"]["success"] for g in gs.grasps])
+    assert ok.any() and (~ok).any() and x[ok].max() < x[~ok].min()  # peel: the held cups are the middle ones
+    medoids = set(gs.candidates.medoids.tolist())
+    labels = gs.candidates.labels
+    for g in gs.grasps:  # a repaired grasp is a member of its own cluster
+        assert g["candidate"] in medoids and tuple(labels[g["candidate"]]) == tuple(g["cluster"])
+    # with criterion hold on, every cup it exports also holds in the simulation
+    held = graspgen.generate(BAR, dict(EXAMPLE_CUP), units="m", points=1500, mass_kg=0.3, k1=4, k2=1, validate=True)
+    assert held.grasps and all(g["sim"]["success"] for g in held.grasps)
+    assert held.stats["validation"]["repaired"] == 0
+
+
+def test_validate_needs_the_mass_and_a_suction_sets_clustering_cannot_validate(tmp_path):
+    import graspgen
+
+    with pytest.raises(InvalidParameterError) as e:
+        graspgen.generate(BAR, dict(EXAMPLE_CUP), units="m", points=300, validate=True)
+    assert e.value.field == "mass_kg"
+    gs = graspgen.generate(BAR, dict(EXAMPLE_CUP), units="m", points=400, mass_kg=0.2, k1=2, k2=1)
+    gs.save_candidates(tmp_path / "c.npz")
+    with pytest.raises(InvalidParameterError) as e:
+        graspgen.recluster(tmp_path / "c.npz", gs.to_json(), k1=2, k2=1, validate=True)
+    assert e.value.field == "validate" and "generate it again" in str(e.value)

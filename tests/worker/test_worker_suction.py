@@ -131,11 +131,23 @@ def test_bulk_jobs_mix_cups_and_jaws(pg_service, runner):
     assert kinds == {"suction", None}
 
 
+def test_a_suction_job_with_validate_simulates_every_exported_cup(pg_service, runner):
+    obj, cup = slug("plate"), slug("cup")
+    assert pg_service.upload(obj, PART).status_code == 201
+    assert pg_service.post("/v1/grippers", json={**CUP, "name": cup}).status_code == 201
+    params = {"points": 600, "k1": 2, "k2": 1, "mass_kg": 0.2, "validate": True}
+    job = run_job(pg_service, runner, {"object": obj, "gripper": cup, "params": params})
+    export = pg_service.get(f"/v1/grasp-sets/{job['grasp_set']}").json()
+    v = export["stats"]["validation"]
+    assert export["params"]["mass_kg"] == 0.2 and v["tested"] == len(export["grasps"]) > 0
+    assert all(g["sim"]["success"] for g in export["grasps"]) and v["succeeded"] == v["tested"]
+    assert "validate" in export["stats"]["timings_s"]
+
+
 #: (gripper, params, field): job params a kind cannot use, refused at submission with the field named
 NOT_FOR_KIND = [
     ("cup", {"inside": True}, "inside"),
     ("cup", {"collision": "paper"}, "collision"),
-    ("cup", {"validate": True}, "validate"),
     ("cup", {"select": "best-near-medoid"}, "select"),
     ("jaw", {"max_tilt_deg": 10.0}, "max_tilt_deg"),
 ]
