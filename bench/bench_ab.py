@@ -30,15 +30,15 @@ CONFIGS = {"paper (a)-(d)": {"hold": "off", "position_tolerance": 0.0}, "(a)-(e)
 STAGES = ("pairs", "collision", "hold")
 
 
-def export_base(rev: str, into: Path) -> None:
-    """The revision's graspgen/ as the package graspgen_base under `into`."""
+def export_base(rev: str, into: Path, package: str = "graspgen_base") -> None:
+    """The revision's graspgen/ as the package `package` under `into`."""
     data = subprocess.run(["git", "archive", rev, "graspgen"], cwd=ROOT, capture_output=True, check=True).stdout
     with tarfile.open(fileobj=BytesIO(data)) as tar:
         tar.extractall(into, filter="data")
-    (into / "graspgen").rename(into / "graspgen_base")
+    (into / "graspgen").rename(into / package)
     pattern = re.compile(r"\b(from|import) graspgen\b(?=[. \n])")
-    for path in (into / "graspgen_base").rglob("*.py"):
-        path.write_text(pattern.sub(r"\1 graspgen_base", path.read_text()))
+    for path in (into / package).rglob("*.py"):
+        path.write_text(pattern.sub(rf"\1 {package}", path.read_text()))
 
 
 def run(points: int, repeat: int) -> dict:

@@ -1,6 +1,7 @@
 """Cold compile of `graspgen warmup`: another revision against this tree, alternated, each on an empty numba cache.
 
     .venv/bin/python bench/bench_compile_ab.py --base 197af76 --pairs 3
+    .venv/bin/python bench/bench_compile_ab.py --base 197af76 --this 700afa0 --pairs 3   # two revisions
 
 The base revision's `graspgen/` is exported as the package `graspgen_base` (bench_ab.export_base). Each run is a new
 process with NUMBA_CACHE_DIR pointing to a new, empty directory, running `warmup()` of its side: base, this tree,
@@ -51,13 +52,19 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--base", required=True, help="the revision to compare against (e.g. 197af76)")
     ap.add_argument("--pairs", type=int, default=3)
+    ap.add_argument("--this", default=None, help="a revision in place of this tree (the working tree by default)")
     a = ap.parse_args()
     runs: dict[str, list[dict]] = {"base": [], "this": []}
     with tempfile.TemporaryDirectory(prefix="bench-compile-") as tmp:
         tmp_path = Path(tmp)
         export_base(a.base, tmp_path / "base")
+        this_root, this_package = ROOT, "graspgen"
+        if a.this is not None:
+            this_root, this_package = tmp_path / "this", "graspgen_this"
+            export_base(a.this, this_root, this_package)
+        sides = (("base", tmp_path / "base", "graspgen_base"), ("this", this_root, this_package))
         for k in range(a.pairs):
-            for side, root, package in (("base", tmp_path / "base", "graspgen_base"), ("this", ROOT, "graspgen")):
+            for side, root, package in sides:
                 r = one(root, package, tmp_path / f"cache-{side}-{k}")
                 runs[side].append(r)
                 print(f"# pair {k + 1} {side}: cpu {r['cpu']:.1f} s", file=sys.stderr, flush=True)
@@ -74,7 +81,8 @@ def main() -> None:
     rows.append(("common steps, wall", lambda r: sum(r["steps"][s] for s in common)))
     rows.append(("all steps, wall", lambda r: sum(r["steps"].values())))
     rows.append(("process CPU (user + system)", lambda r: float(r["cpu"])))
-    print(f"| step (median of {a.pairs} cold runs each) | base {a.base} (s) | this tree (s) | this / base |")
+    this = "this tree" if a.this is None else a.this
+    print(f"| step (median of {a.pairs} cold runs each) | base {a.base} (s) | {this} (s) | this / base |")
     print("|---|---:|---:|---:|")
     for name, fn in rows:
         b, t = med("base", fn), med("this", fn)
@@ -82,6 +90,10 @@ def main() -> None:
     if added:
         print(f"\nsteps only this tree runs: {', '.join(added)}")
     print("\nper run, process CPU s: " + json.dumps({k: [round(r["cpu"], 1) for r in v] for k, v in runs.items()}))
+    per_run = {k: [round(sum(r["steps"][s] for s in common), 1) for r in v] for k, v in runs.items()}
+    print("per run, common steps s: " + json.dumps(per_run))
+    ratios = [t / b for t, b in zip(per_run["this"], per_run["base"], strict=True)]
+    print(f"paired ratio of the common steps (this / base, pair by pair): {[round(x, 2) for x in ratios]}")
 
 
 if __name__ == "__main__":

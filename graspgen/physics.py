@@ -89,6 +89,7 @@ __all__ = [
     "simulate_grasps",
     "simulate_perturbed",
     "first_failures",
+    "check_validation_inputs",
     "validation_set",
     "summarise",
 ]
@@ -291,6 +292,22 @@ def perturbation_set(seed: int = 0) -> tuple[Perturbation, ...]:
         )
     )
     return tuple(members)
+
+
+def check_validation_inputs(mass: float | None, engines: tuple[str, ...] = ("coacd", "mujoco")) -> None:
+    """InvalidParameterError naming the field when `validate` cannot run: a module of the `validate` extra missing
+    (the library alone does not install them; `engines`: what this validation imports) or no mass for the part."""
+    import importlib
+
+    for name in engines:
+        try:
+            importlib.import_module(name)
+        except ImportError:
+            raise InvalidParameterError(
+                f"validate needs {name}: pip install 'graspgen[validate]'", field="validate"
+            ) from None
+    if mass is None:
+        raise InvalidParameterError("validate needs the part's mass: give mass_kg or density", field="mass_kg")
 
 
 def validation_set(friction: float) -> tuple[Perturbation, ...]:

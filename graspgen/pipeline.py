@@ -554,15 +554,9 @@ def _normal_spread(
 
 
 def _check_validation_inputs(mass: float | None, spec: GripperSpec) -> None:
-    try:  # the `validate` extra: the library alone does not install them
-        import coacd  # noqa: F401
-        import mujoco  # noqa: F401
-    except ImportError as exc:
-        raise InvalidParameterError(
-            f"validate needs {exc.name}: pip install 'graspgen[validate]'", field="validate"
-        ) from None
-    if mass is None:
-        raise InvalidParameterError("validate needs the part's mass: give mass_kg or density", field="mass_kg")
+    from .physics import check_validation_inputs
+
+    check_validation_inputs(mass)
     if spec.grip_force is None:
         raise InvalidParameterError("validate needs the gripper's grip_force (N per finger)", field="grip_force")
 
@@ -1230,31 +1224,8 @@ def _validate(
         return physics.first_failures(sims, checks)
 
     # the first pass gets half of the stage's progress after the part's model, the repair rounds the rest
-    first_hi = 0.55 if limit else 1.0
-    results = run(selected, 0.1, first_hi)
-    first = list(results)
-    simulated = len(selected)
-    final = selected.copy()
-    alternatives = {}
-    mids, axes = cands.midpoints, cands.axes
-    for r, res in enumerate(results):
-        if res.success or extras.options.repair_limit == 0:
-            continue
-        t, k = clusters[r]
-        members = np.flatnonzero((labels[:, 0] == t) & (labels[:, 1] == k))
-        members = members[members != selected[r]]
-        ordered, _ = quality.members_by_distance(members, int(selected[r]), mids, axes)
-        alternatives[r] = ordered[: extras.options.repair_limit]
-    for j in range(extras.options.repair_limit):
-        rows = [r for r, alts in alternatives.items() if not results[r].success and j < len(alts)]
-        if not rows:
-            break
-        idx = np.array([alternatives[r][j] for r in rows], dtype=np.int64)
-        simulated += len(idx)
-        lo = first_hi + (1.0 - first_hi) * j / limit
-        for r, m, res in zip(rows, idx, run(idx, lo, lo + (1.0 - first_hi) / limit), strict=True):
-            if res.success:
-                final[r], results[r] = m, res
+    rep = quality.repair_by_simulation(selected, clusters, labels, (cands.midpoints, cands.axes), limit, run)
+    final, results, first, simulated = rep.selected, rep.results, rep.first, rep.simulated
     report("validate", 1.0)
     import mujoco
 

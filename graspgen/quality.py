@@ -24,8 +24,9 @@ clusters' diversity and drops weak representatives.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 import numpy as np
 from numba import njit, prange
@@ -224,6 +225,68 @@ def members_by_distance(
     dist = np.maximum(dt / near.radius, ang / near.angle_deg)
     order = np.lexsort((members, dist))
     return members[order], dist[order]
+
+
+class _Held(Protocol):
+    @property
+    def success(self) -> bool: ...
+
+
+_O = TypeVar("_O", bound=_Held)
+
+
+@dataclass(frozen=True)
+class Repaired:
+    """The selection after validation: `selected` (k,) candidate indices (a failing one replaced where a member of
+    its cluster held), `results` each one's outcome, `first` the outcomes of the first pass, `simulated` how many
+    candidates were simulated in all."""
+
+    selected: np.ndarray
+    results: list[Any]
+    first: list[Any]
+    simulated: int
+
+
+def repair_by_simulation(
+    selected: np.ndarray,
+    clusters: np.ndarray,
+    labels: np.ndarray,
+    geometry: tuple[np.ndarray, np.ndarray],
+    limit: int,
+    simulate: Callable[[np.ndarray, float, float], Sequence[_O]],
+    start: float = 0.1,
+) -> Repaired:
+    """The validation's selection: simulate(idx, lo, hi) gives the outcomes of candidates idx (reporting progress
+    from lo to hi). The selected candidates are simulated first (progress from `start`); each that fails is replaced
+    by the first of up to `limit` members of its final cluster (`clusters` (k, 2) per selected, `labels` (n, 2) per
+    candidate), nearest to it first (members_by_distance over `geometry` = (midpoints, axes)), that holds. The jaws'
+    and the suction cups' validation share it."""
+    mids, axes = geometry
+    first_hi = 0.55 if limit else 1.0
+    results = list(simulate(selected, start, first_hi))
+    first = list(results)
+    simulated = len(selected)
+    final = selected.copy()
+    alternatives = {}
+    for r, res in enumerate(results):
+        if res.success or limit == 0:
+            continue
+        t, k = clusters[r]
+        members = np.flatnonzero((labels[:, 0] == t) & (labels[:, 1] == k))
+        members = members[members != selected[r]]
+        ordered, _ = members_by_distance(members, int(selected[r]), mids, axes)
+        alternatives[r] = ordered[:limit]
+    for j in range(limit):
+        rows = [r for r, alts in alternatives.items() if not results[r].success and j < len(alts)]
+        if not rows:
+            break
+        idx = np.array([alternatives[r][j] for r in rows], dtype=np.int64)
+        simulated += len(idx)
+        lo = first_hi + (1.0 - first_hi) * j / limit
+        for r, m, res in zip(rows, idx, simulate(idx, lo, lo + (1.0 - first_hi) / limit), strict=True):
+            if res.success:
+                final[r], results[r] = m, res
+    return Repaired(final, results, first, simulated)
 
 
 def select_best_near_medoid(

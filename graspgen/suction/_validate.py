@@ -13,7 +13,6 @@ import numpy as np
 import trimesh
 
 from .. import quality
-from ..errors import InvalidParameterError
 from ..params import QualityOptions
 from ._export import SuctionCandidates
 from ._spec import SuctionSpec
@@ -31,16 +30,11 @@ Validator = Callable[
 
 
 def check_validation_inputs(mass: float | None) -> None:
-    """InvalidParameterError naming the field when `validate` cannot run: MuJoCo missing (the `validate` extra) or
-    no mass for the part."""
-    try:  # the `validate` extra: the library alone does not install it
-        import mujoco  # noqa: F401
-    except ImportError as exc:
-        raise InvalidParameterError(
-            f"validate needs {exc.name}: pip install 'graspgen[validate]'", field="validate"
-        ) from None
-    if mass is None:
-        raise InvalidParameterError("validate needs the part's mass: give mass_kg or density", field="mass_kg")
+    """InvalidParameterError naming the field when `validate` cannot run for a cup: MuJoCo missing (the `validate`
+    extra) or no mass for the part."""
+    from ..physics import check_validation_inputs as check
+
+    check(mass, engines=("mujoco",))
 
 
 def suction_validator(
@@ -87,30 +81,9 @@ def suction_validator(
             )
             return physics.first_failures(grid, checks)
 
-        first_hi = 0.55 if limit else 1.0
-        results = simulate(selected, 0.05, first_hi)
-        first = list(results)
-        simulated = len(selected)
-        final = selected.copy()
-        alternatives: dict[int, np.ndarray] = {}
-        for r, res in enumerate(results):
-            if res.success or limit == 0:
-                continue
-            t, k = clusters[r]
-            members = np.flatnonzero((labels[:, 0] == t) & (labels[:, 1] == k))
-            members = members[members != selected[r]]
-            ordered, _ = quality.members_by_distance(members, int(selected[r]), cands.midpoints, cands.approach)
-            alternatives[r] = ordered[:limit]
-        for j in range(limit):
-            rows = [r for r, alts in alternatives.items() if not results[r].success and j < len(alts)]
-            if not rows:
-                break
-            idx = np.array([alternatives[r][j] for r in rows], dtype=np.int64)
-            simulated += len(idx)
-            lo = first_hi + (1.0 - first_hi) * j / limit
-            for r, m, res in zip(rows, idx, simulate(idx, lo, lo + (1.0 - first_hi) / limit), strict=True):
-                if res.success:
-                    final[r], results[r] = m, res
+        geometry = (cands.midpoints, cands.approach)
+        rep = quality.repair_by_simulation(selected, clusters, labels, geometry, limit, simulate, start=0.05)
+        final, results, first, simulated = rep.selected, rep.results, rep.first, rep.simulated
         report("validate", 1.0)
         stats["validation"] = {
             **physics_suction.summarise_suction(results),
