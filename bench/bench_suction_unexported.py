@@ -4,7 +4,7 @@ grasps that the simulation shows can be held")?
     .venv/bin/python bench/bench_suction_unexported.py                       # cup-30, 0.2 kg, 800 points a part
     .venv/bin/python bench/bench_suction_unexported.py --points 3000 --parts tless_04.stl paper/sileane_pepper.stl
 
-For each part (default: the shared meshes on which cup-30 exported nothing at 1cb583e), `--points` surface points
+For each part (default: the shared meshes on which cup-30 exports nothing at 9ce0834), `--points` surface points
 (seeded) with the approach along the inward normal are sealed by the simulation's own seal
 (`physics_suction.seal_at`, with its placement error); those that seal are simulated under the 13 settings
 (`suction_perturbation_set`) and judged by the criteria (`suction.judge_cups`, at the pose and within the position
@@ -37,6 +37,8 @@ PARTS = (
     "trimesh_idler_riser.stl",
     "trimesh_round.stl",
     "paper/sileane_pepper.stl",
+    "paper/IPAGearShaft.stl",
+    "paper/IPARingScrew.stl",
 )
 
 
