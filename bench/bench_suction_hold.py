@@ -38,23 +38,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import graspgen  # noqa: E402
 from graspgen import physics_suction as ps  # noqa: E402
+from graspgen.examples import EXAMPLE_CUP  # noqa: E402
 from graspgen.parts import load_part  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "meshes"
 FOLDERS = (SHARED, SHARED / "paper")
 START, END = "<!-- bench_suction_hold:start -->", "<!-- bench_suction_hold:end -->"
-CUP_30 = {
-    "name": "cup-30",
-    "kind": "suction",
-    "cup_radius": 0.015,
-    "cup_height": 0.02,
-    "max_strain": 0.1,
-    "vacuum": 60000,
-    "friction": 0.5,
-    "tool": {"radius": 0.012, "length": 0.12},
-    "pregrasp_clearance": 0.03,
-}
 
 
 def parts(names: list[str] | None):
@@ -74,7 +64,7 @@ def parts(names: list[str] | None):
 
 def load_cup(path: str | None) -> dict:
     """The suction spec's fields (generate() takes the dict; the contract's cup-30 by default)."""
-    return json.loads(Path(path).read_text()) if path else dict(CUP_30)
+    return json.loads(Path(path).read_text()) if path else dict(EXAMPLE_CUP)
 
 
 def frames(contacts: np.ndarray, approaches: np.ndarray) -> np.ndarray:

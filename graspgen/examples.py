@@ -16,7 +16,16 @@ import trimesh
 from .errors import InvalidParameterError
 from .parts import Part, load_part
 
-__all__ = ["EXAMPLES", "EXAMPLE_GRIPPER", "example_part", "ring_screw", "bar", "flanged_bushing", "thick_ring"]
+__all__ = [
+    "EXAMPLES",
+    "EXAMPLE_GRIPPER",
+    "EXAMPLE_CUP",
+    "example_part",
+    "ring_screw",
+    "bar",
+    "flanged_bushing",
+    "thick_ring",
+]
 
 
 def ring_screw() -> trimesh.Trimesh:
@@ -90,6 +99,19 @@ EXAMPLE_GRIPPER: dict[str, object] = {
     "friction": 0.5,
     "pregrasp_clearance": 0.02,
     "grip_force": 20.0,
+}
+
+#: the contract's suction cup (examples/cup-30.json): a 30 mm cup at 60 kPa on a round tool
+EXAMPLE_CUP: dict[str, object] = {
+    "name": "cup-30",
+    "kind": "suction",
+    "cup_radius": 0.015,
+    "cup_height": 0.02,
+    "max_strain": 0.1,
+    "vacuum": 60000,
+    "friction": 0.5,
+    "tool": {"radius": 0.012, "length": 0.12},
+    "pregrasp_clearance": 0.03,
 }
 
 EXAMPLES: dict[str, Callable[[], trimesh.Trimesh]] = {

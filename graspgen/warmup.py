@@ -127,20 +127,12 @@ def _cup(*, body: bool) -> Any:
     job runs, the per-roll body test included."""
     import io
 
+    from .examples import EXAMPLE_CUP
     from .suction import SuctionSpec
 
-    spec: dict[str, Any] = {
-        "name": "warmup-cup",
-        "kind": "suction",
-        "cup_radius": 0.015,
-        "cup_height": 0.02,
-        "max_strain": 0.1,
-        "vacuum": 60000,
-        "friction": 0.5,
-        "pregrasp_clearance": 0.03,
-    }
     if not body:
-        return SuctionSpec.from_dict({**spec, "tool": {"radius": 0.012, "length": 0.12}})
+        return SuctionSpec.from_dict(dict(EXAMPLE_CUP))
+    spec = {k: v for k, v in EXAMPLE_CUP.items() if k != "tool"}
     box = trimesh.creation.box(extents=[0.03, 0.02, 0.1])
     box.apply_translation([0.005, 0, -0.07])
     buf = io.BytesIO()

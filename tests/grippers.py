@@ -4,7 +4,7 @@ off). Tests that check those defaults rely on their being left out."""
 
 from __future__ import annotations
 
-from graspgen.examples import EXAMPLE_GRIPPER
+from graspgen.examples import EXAMPLE_CUP, EXAMPLE_GRIPPER
 
 __all__ = ["GRIPPER", "CUP"]
 
@@ -13,14 +13,4 @@ GRIPPER: dict[str, object] = {
 }
 
 #: the contract's suction cup (examples/cup-30.json): a 30 mm cup at 60 kPa on a round tool
-CUP: dict[str, object] = {
-    "name": "cup-30",
-    "kind": "suction",
-    "cup_radius": 0.015,
-    "cup_height": 0.02,
-    "max_strain": 0.1,
-    "vacuum": 60000,
-    "friction": 0.5,
-    "tool": {"radius": 0.012, "length": 0.12},
-    "pregrasp_clearance": 0.03,
-}
+CUP: dict[str, object] = dict(EXAMPLE_CUP)

@@ -14,7 +14,6 @@ import copy
 import math
 import os
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import IO, Any
 
@@ -36,7 +35,7 @@ from ._hold import LIMITS, HoldRule, hold_kernel
 from ._model import SUCTION, SuctionModel, depth_limits, inner_probes, lip_points
 from ._seal import PASS, REASONS, SealPart, SealRule, seal_kernel
 from ._spec import MAX_VACUUM, SuctionSpec
-from ._validate import Validator, check_validation_inputs, suction_validator
+from ._validate import Progress, Validator, check_validation_inputs, suction_validator
 
 __all__ = [
     "generate_suction",
@@ -51,8 +50,6 @@ __all__ = [
 
 #: the criteria in the order they run (and the keys of stats.rejected)
 CRITERIA = ("seal", "tilt", "hold", "collision")
-
-Progress = Callable[[str, float], None]
 
 
 def _noop(stage: str, fraction: float) -> None:

@@ -8,7 +8,7 @@ from typing import Annotated, Any, Literal, cast
 
 from pydantic import BaseModel, ConfigDict, Field, WithJsonSchema, model_validator
 
-from graspgen.examples import EXAMPLE_GRIPPER
+from graspgen.examples import EXAMPLE_CUP, EXAMPLE_GRIPPER
 from graspgen.gripper import SLUG_PATTERN
 
 SLUG = SLUG_PATTERN.pattern
@@ -18,17 +18,7 @@ ID_MAX = 2**31 - 1
 # Any: pydantic types json_schema_extra as JSON values, which dict[str, object] is not to mypy
 _GRIPPER_EXAMPLE: dict[str, Any] = dict(EXAMPLE_GRIPPER)
 #: examples/cup-30.json, the contract's suction cup
-SUCTION_SPEC_EXAMPLE: dict[str, Any] = {
-    "name": "cup-30",
-    "kind": "suction",
-    "cup_radius": 0.015,
-    "cup_height": 0.02,
-    "max_strain": 0.1,
-    "vacuum": 60000,
-    "friction": 0.5,
-    "tool": {"radius": 0.012, "length": 0.12},
-    "pregrasp_clearance": 0.03,
-}
+SUCTION_SPEC_EXAMPLE: dict[str, Any] = dict(EXAMPLE_CUP)
 PARAMS_EXAMPLE: dict[str, Any] = {"points": 10000, "safety_factor": 1.5, "rolls": 16, "k1": 16, "k2": 4, "seed": 0}
 
 

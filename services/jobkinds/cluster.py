@@ -103,24 +103,14 @@ def run(ctx: RunContext) -> GraspSet | SuctionGraspSet:
     params, options = from_job(p)
     # a spec with geometry: with its meshes (the export holds only their digests); a spec without: from the export
     gripper = ctx.gripper() if file_digests(inp.spec) else None
-    if gripper_kind(inp.spec) != "parallel":
-        # a suction set: its NPZ and export alone (graspgen.recluster reads the kind from the export); the candidates
-        # passed criterion hold with the set's mass, and clustering needs no part
-        return graspgen.recluster(
-            str(npz),
-            previous,
-            gripper=gripper,
-            k1=params.k1,
-            k2=params.k2,
-            seed=params.seed,
-            recording=ctx.recording,
-            progress=ctx.progress,
-            options=options,
-        )
-    part: dict[str, str] = {}
-    if options.needs_part:
-        # validation and quality scoring need the part; recluster loads it in metres from `units`
-        part = {"mesh": str(ctx.download_part()), "units": inp.units}
+    extra: dict[str, Any] = {}
+    if gripper_kind(inp.spec) == "parallel":
+        # the mass for validation only; validation and quality scoring need the part, which recluster loads in
+        # metres from `units`. A suction set's NPZ and export are all it needs (graspgen.recluster reads the kind
+        # from the export): its candidates passed criterion hold with the set's mass, and clustering needs no part
+        extra = {"mass_kg": params.mass_kg, "density": params.density}
+        if options.needs_part:
+            extra.update(mesh=str(ctx.download_part()), units=inp.units)
     return graspgen.recluster(
         str(npz),
         previous,
@@ -131,9 +121,7 @@ def run(ctx: RunContext) -> GraspSet | SuctionGraspSet:
         recording=ctx.recording,
         progress=ctx.progress,
         options=options,
-        mass_kg=params.mass_kg,  # recluster takes the mass for validation only
-        density=params.density,
-        **part,
+        **extra,
     )
 
 
