@@ -39,27 +39,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import graspgen  # noqa: E402
 from graspgen import physics_suction as ps  # noqa: E402
 from graspgen.examples import EXAMPLE_CUP  # noqa: E402
-from graspgen.parts import load_part  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_hold import parts  # noqa: E402  (the shared meshes with their units, as bench_hold reads them)
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED = ROOT.parent / "shared" / "meshes"
-FOLDERS = (SHARED, SHARED / "paper")
 START, END = "<!-- bench_suction_hold:start -->", "<!-- bench_suction_hold:end -->"
-
-
-def parts(names: list[str] | None):
-    for folder in FOLDERS:
-        units_file = folder / "units.json"
-        if not units_file.is_file():
-            print(f"skipped: {folder} (missing, or no units.json)", flush=True)
-            continue
-        units = json.loads(units_file.read_text())
-        for file in sorted(units):
-            path = folder / file
-            if "/" in file or path.suffix.lower() not in (".stl", ".obj") or not path.is_file():
-                continue
-            if not names or path.stem in names:
-                yield f"{folder.name}/{path.stem}", load_part(path, units=units[file], name=path.stem)
 
 
 def load_cup(path: str | None) -> dict:
