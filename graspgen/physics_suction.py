@@ -1,6 +1,9 @@
 """Physics validation of suction grasps in MuJoCo: seal a cup on the part, lift it against gravity, turn it, shake it.
 
-An independent check of the suction criteria (`seal`, `hold`): nothing here uses their formulas. The simulation runs
+A check of the suction criteria that shares none of their code. Criterion `hold`'s wrench model is not used at
+all: the vacuum, the lip's compliance, friction and peel act as bodies and contacts. The seal at setup is the cup's
+spring model (Dex-Net 3.0's, as criterion `seal`; the cup's walls are its springs), found on the part's triangles by
+its own rays after the placement error, with its own discretisation of the springs. The simulation runs
 in the grasp frame of the contract's suction cups (origin at the contact, the lip's centre on the surface; +Z the
 approach, into the part along the cup's axis; the cup behind the lip at -Z). The cup stays put; the part is a free
 body placed at `inv(T_object_grasp)` with the same seeded placement error as the jaw validation
@@ -11,10 +14,13 @@ The cup (every constant in `SuctionSimConstants`):
 
 1. setup, on the part's own triangles: rays along +Z from the cup's base (z = -cup_height) through `ring_rays` points
    of the lip circle (radius `cup_radius`) and through points inside it. The lip ring must meet the surface within
-   the cup's travel (z in [-cup_height, +cup_height]) at every ray, in front of the part's material; the contact ring
-   may stretch the lip by at most `max_strain`, around its perimeter and from the centre to each lip point (the lip's
-   circumference and its radial cone); every ray inside the ring must meet the part (a ray that passes through is a
-   hole the vacuum leaks through). Otherwise the outcome is `no_seal`.
+   the cup's travel (z in [-cup_height, +cup_height]) at every ray, in front of the part's material. The cup's wall
+   then takes the shape of the contact ring: its springs may strain by at most `max_strain`. Around the lip, each of
+   the `perimeter_springs` is a chord between two ring rays (a step or an edge between them lengthens it); across the
+   wall, each cone spring runs from the cup's mount, `cup_height` behind the point where the axis meets the surface
+   (the tool stops the cup there, whatever the placement error along the axis), to a ray's hit on the ring,
+   stretched where the surface falls away and compressed where it rises. Every ray inside the ring must meet the
+   part (a ray that passes through is a hole the vacuum leaks through). Otherwise the outcome is `no_seal`.
 2. the lip: `lips` small spheres on the ring, each on its own slide joint along the cup's axis with a spring (the
    bellows' and lip's axial compliance, at rest where the lip met the surface). Each sphere touches only a patch of
    the part's surface where it met it: a thin box in the tangent plane of the triangle hit there, fixed to the part.
@@ -105,6 +111,12 @@ class SuctionSimConstants:
     #: rays inside the ring at setup: (count, radius as a fraction of the cup radius) per circle; a hole wider than
     #: a third of the radius (5 mm in a 30 mm cup) meets at least one
     interior_rays: tuple[tuple[int, float], ...] = ((1, 0.0), (8, 1.0 / 3.0), (16, 2.0 / 3.0))
+    #: the cup's lip as springs at setup (a divisor of `ring_rays`): each is the chord between two ring rays, rest
+    #: length the flat ring's (2.9 mm on a 30 mm cup). A spring's length is the scale on which the lip bends: a step
+    #: s between its ends strains it by sqrt(1 + (s / c0)^2) - 1, so 32 springs tolerate a 1.35 mm step at 10 %. It
+    #: is the cup model's, the same 32-gon lip as criterion `seal`'s (Dex-Net 3.0's cup is an n-gon of springs):
+    #: the two judge one cup
+    perimeter_springs: int = 32
     #: radius of each lip point's sphere: small against the cup, large enough that a tilted patch is met smoothly
     lip_sphere_radius: float = 1.0e-3
     #: mass of each lip point (kg): the lip and bellows of a 30 mm cup weigh a few grams in all; with the stiffness
@@ -141,6 +153,10 @@ class SuctionSimConstants:
     def __post_init__(self) -> None:
         if self.lips < 3 or self.ring_rays % self.lips:
             raise InvalidParameterError("ring_rays must be a multiple of lips (>= 3)", field="lips")
+        if self.perimeter_springs < 3 or self.ring_rays % self.perimeter_springs:
+            raise InvalidParameterError(
+                "ring_rays must be a multiple of perimeter_springs (>= 3)", field="perimeter_springs"
+            )
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -151,8 +167,9 @@ SUCTION_SIM = SuctionSimConstants()
 
 @dataclass(frozen=True)
 class SuctionCup:
-    """The cup as the simulation needs it (a `SuctionSpec` has these fields): lip radius and the bellows' travel (m),
-    the largest stretch of the lip (0.1 = 10 %), the pressure difference (Pa) and the Coulomb coefficient lip/part."""
+    """The cup as the simulation needs it (a `SuctionSpec` has these fields): lip radius and the cup's height (m),
+    the largest strain of its springs (0.1 = 10 %), the pressure difference (Pa) and the Coulomb coefficient
+    lip/part."""
 
     cup_radius: float
     cup_height: float
@@ -343,10 +360,10 @@ class SuctionSeal:
     """Where the cup's lip meets the part for one grasp, at the placement (with its placement error).
 
     `R`, `p`: the part's pose in the grasp frame (the cup's); `ok` and, when not, `detail` (why there is no seal);
-    `strain`: the larger of the ring's perimeter and cone stretch; `lip_z` (lips,) the height of each simulated lip
-    point where it meets the surface (grasp frame z, m), `lip_points` (lips, 3) and `lip_normals` (lips, 3) the
-    surface there (object frame, normals towards the cup), `centre` (3,) the contact point on the cup's axis (object
-    frame)."""
+    `strain`: the largest strain of the cup's perimeter and cone springs (`_lip_strain`); `lip_z` (lips,) the height
+    of each simulated lip point where it meets the surface (grasp frame z, m), `lip_points` (lips, 3) and
+    `lip_normals` (lips, 3) the surface there (object frame, normals towards the cup), `centre` (3,) the contact point
+    on the cup's axis (object frame)."""
 
     R: np.ndarray
     p: np.ndarray
@@ -364,6 +381,22 @@ def _ring(count: int, radius: float) -> np.ndarray:
     return np.array(
         [(radius * math.cos(2 * math.pi * k / count), radius * math.sin(2 * math.pi * k / count)) for k in range(count)]
     ).reshape(-1, 2)
+
+
+def _lip_strain(xy: np.ndarray, z: np.ndarray, height: float, springs: int) -> float:
+    """The largest strain of the cup's springs when the ring points `xy` (n, 2) of the cup's plane meet the surface
+    at heights `z` (n,) (m, along the axis from where the axis meets the surface): `springs` perimeter springs, the
+    chords between every (n / springs)-th ring point against the flat ring's, and the cone springs from the cup's
+    mount, `height` behind that point on the axis, to every ring point, stretched or compressed."""
+    P = np.column_stack([xy, z])[:: len(xy) // springs]
+    flat = np.column_stack([xy, np.zeros(len(xy))])[:: len(xy) // springs]
+    chord = np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1)
+    chord0 = np.linalg.norm(np.roll(flat, -1, axis=0) - flat, axis=1)
+    perimeter = float(np.max(chord / chord0)) - 1.0
+    mount = np.array([0.0, 0.0, -height])
+    ring = np.column_stack([xy, z])
+    cone = np.linalg.norm(ring - mount, axis=1) / math.hypot(float(np.linalg.norm(xy[0])), height) - 1.0
+    return max(perimeter, float(np.max(np.abs(cone))))
 
 
 def seal_at(
@@ -417,15 +450,12 @@ def seal_at(
         return fail(f"the lip ring misses the surface at {missing} of {n_ring} points")
     if not np.all(hit[n_ring:]):
         return fail(f"{int(np.sum(~hit[n_ring:]))} rays inside the ring pass through the part (a hole)")
-    P = np.column_stack([xy[:n_ring], ring_z])
-    flat = np.column_stack([xy[:n_ring], np.zeros(n_ring)])
-    perimeter = float(np.sum(np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1)))
-    perimeter0 = float(np.sum(np.linalg.norm(np.roll(flat, -1, axis=0) - flat, axis=1)))
-    centre_z = float(z[n_ring])  # the first interior ray is the axis
-    cone = float(np.max(np.linalg.norm(P - np.array([0.0, 0.0, centre_z]), axis=1))) / r - 1.0
-    strain = max(perimeter / perimeter0 - 1.0, cone)
+    centre_z = float(z[n_ring])  # the first interior ray is the axis: the tool stops the cup's mount h behind it
+    strain = _lip_strain(xy[:n_ring], ring_z - centre_z, hgt, c.perimeter_springs)
     if strain > cup.max_strain:
-        return fail(f"the lip would stretch {100 * strain:.1f} % (max_strain {100 * cup.max_strain:.1f} %)", strain)
+        return fail(
+            f"the lip's springs would strain {100 * strain:.1f} % (max_strain {100 * cup.max_strain:.1f} %)", strain
+        )
     lips = np.arange(0, n_ring, lip_every)
     n_lip = normals[tri[first[lips]]]
     n_lip = np.where((n_lip @ direction)[:, None] > 0, -n_lip, n_lip)  # towards the cup (an open mesh's winding)
@@ -519,7 +549,7 @@ class SuctionSimResult:
     rotation_deg: float  # largest rotation of the part relative to the cup after sealing
     #: lip points touching the part once sealed (0 for no_seal)
     lips: int
-    #: the larger of the lip ring's perimeter and cone stretch at setup (inf when the ring misses the surface)
+    #: the largest strain of the lip's perimeter and cone springs at setup (inf when the ring misses the surface)
     strain: float
     #: the largest gap (mm) any lip point opened while the seal held (capped at twice the gap limit)
     peak_gap_mm: float = 0.0

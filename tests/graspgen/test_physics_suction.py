@@ -109,8 +109,8 @@ def test_a_perturbation_replaces_the_cups_friction():
         (trimesh.creation.annulus(0.0025, 0.05, 0.01), (0.0, 0.0, 0.005), "pass through the part"),
         # 5 mm from the plate's edge: a third of the ring hangs over it
         (PLATE, (0.045, 0.0, 0.005), "misses the surface"),
-        # a sphere of 16 mm radius: the 15 mm ring lies 10 mm below the top, the lip would stretch by 24 %
-        (trimesh.creation.icosphere(4, 0.016), (0.0, 0.0, 0.016), "stretch"),
+        # a sphere of 16 mm radius: the 15 mm ring lies 10 mm below the top, its cone springs would stretch by 35 %
+        (trimesh.creation.icosphere(4, 0.016), (0.0, 0.0, 0.016), "springs would strain"),
     ],
     ids=["hole-40mm", "hole-5mm", "across-an-edge", "sphere-16mm"],
 )
@@ -121,9 +121,54 @@ def test_no_seal_over_a_hole_across_an_edge_or_on_a_tight_sphere(mesh, contact, 
 
 
 def test_a_sphere_much_larger_than_the_cup_seals_and_holds():
-    ball = trimesh.creation.icosphere(4, 0.04)
-    (row,) = ps.simulate_suction(ball, frame((0.0, 0.0, 0.04), (0.0, 0.0, -1.0))[None], CUP, mass_kg=0.2)
+    ball = trimesh.creation.icosphere(4, 0.05)
+    (row,) = ps.simulate_suction(ball, frame((0.0, 0.0, 0.05), (0.0, 0.0, -1.0))[None], CUP, mass_kg=0.2)
     assert row[0].success and 0.0 < row[0].strain < CUP.max_strain
+
+
+def cone_strain(depth: float, cup: ps.SuctionCup = CUP) -> float:
+    """The strain of a cone spring, mount `cup_height` behind the contact, to a lip point `depth` below it."""
+    r, h = cup.cup_radius, cup.cup_height
+    return math.hypot(r, h + depth) / math.hypot(r, h) - 1.0
+
+
+def lying_cylinder(radius: float) -> trimesh.Trimesh:
+    """A 100 mm cylinder along X, its top line at z = radius."""
+    turn = trimesh.transformations.rotation_matrix(math.pi / 2, (0.0, 1.0, 0.0))
+    return trimesh.creation.cylinder(radius=radius, height=0.1, sections=256, transform=turn)
+
+
+@pytest.mark.parametrize(("radius", "seals"), [(0.02, False), (0.06, True)])
+def test_on_a_cylinder_the_cups_cone_springs_decide_the_seal(radius, seals):
+    # the lip's sides lie R - sqrt(R^2 - r^2) below the top line: 6.8 mm on a 20 mm cylinder, where the cone springs
+    # from the mount 20 mm behind the contact stretch by 22.7 %; 1.9 mm on a 60 mm one (6.2 %). Measured from the
+    # contact alone (no cup height) the 20 mm cylinder's lip would stretch 9.8 % and seal
+    depth = radius - math.sqrt(radius**2 - CUP.cup_radius**2)
+    (row,) = ps.simulate_suction(
+        lying_cylinder(radius), frame((0.0, 0.0, radius), (0.0, 0.0, -1.0))[None], CUP, mass_kg=0.2, perturbations=ALL
+    )
+    assert all(r.success is seals for r in row)
+    # the placement error (0.2 mm, 0.2 degrees) moves the lip across the cylinder: 0.8 % more on the 20 mm one
+    assert row[0].strain == pytest.approx(cone_strain(depth), abs=0.01)
+    if not seals:
+        assert all(r.reason == "no_seal" for r in row) and "springs would strain" in (row[0].detail or "")
+
+
+def test_a_step_under_the_lip_breaks_the_seal_where_the_whole_ring_would_not():
+    # a plate with a 3 mm step 5 mm beside the contact: the ring crosses it twice. The cone springs to the lower side
+    # stretch 9.8 %, within max_strain, and the whole ring's perimeter by 4 %; the perimeter spring across the step
+    # (a chord of the 32-gon lip, c0 = 2.94 mm) by sqrt(1 + (3 / c0)^2) - 1 = 43 %
+    lower = trimesh.creation.box(extents=(0.1, 0.1, 0.01))
+    upper = trimesh.creation.box(extents=(0.055, 0.1, 0.003))
+    upper.apply_translation((0.005 - 0.0275, 0.0, 0.0065))
+    step = trimesh.util.concatenate([lower, upper])
+    assert cone_strain(0.003) < CUP.max_strain
+    (row,) = ps.simulate_suction(step, frame((0.0, 0.0, 0.008), (0.0, 0.0, -1.0))[None], CUP, mass_kg=0.2)
+    c0 = 2 * CUP.cup_radius * math.sin(math.pi / ps.SUCTION_SIM.perimeter_springs)
+    assert row[0].reason == "no_seal" and row[0].strain == pytest.approx(math.hypot(1.0, 0.003 / c0) - 1.0, abs=0.01)
+    # the same plate without the step seals
+    (flat,) = ps.simulate_suction(lower, TOP[None], CUP, mass_kg=0.2)
+    assert flat[0].success and flat[0].strain < 0.01
 
 
 def test_the_seal_is_found_on_the_triangles_after_the_placement_error():
@@ -197,6 +242,8 @@ def test_bad_input_is_refused():
         ps.SuctionCup.of(SimpleNamespace(cup_radius=0.015, cup_height=0.02, vacuum=6e4, friction=0.5))
     with pytest.raises(InvalidParameterError, match="multiple"):
         ps.SuctionSimConstants(lips=16, ring_rays=60)
+    with pytest.raises(InvalidParameterError, match="perimeter_springs"):
+        ps.SuctionSimConstants(perimeter_springs=24)
     assert ps.simulate_suction(PLATE, np.zeros((0, 4, 4)), CUP, mass_kg=0.2) == []
 
 
