@@ -232,8 +232,8 @@ def markdown(rows, members, args, wall) -> str:
         lines += [
             "",
             f"`hold` against the simulation: up to {args.sample} candidates per part and class (margin >= 1: pass, "
-            "< 1: fail; seeded) among those that pass seal and collision; `no_seal` (the simulation's lip ring misses "
-            "the surface after the placement error: not hold's question) counted apart.",
+            "< 1: fail; seeded) among those that pass seal and collision; `no_seal` (the simulation finds no seal "
+            "after its placement error: not hold's question) counted apart.",
             "",
             "| hold | candidates | simulated | no_seal | held (all 13) | dropped or slipped | held nominally |",
             "|---|---|---|---|---|---|---|",

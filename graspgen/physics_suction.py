@@ -19,8 +19,10 @@ The cup (every constant in `SuctionSimConstants`):
    the `perimeter_springs` is a chord between two ring rays (a step or an edge between them lengthens it); across the
    wall, each cone spring runs from the cup's mount, `cup_height` behind the point where the axis meets the surface
    (the tool stops the cup there, whatever the placement error along the axis), to a ray's hit on the ring,
-   stretched where the surface falls away and compressed where it rises. Every ray inside the ring must meet the
-   part (a ray that passes through is a hole the vacuum leaks through). Otherwise the outcome is `no_seal`.
+   stretched where the surface falls away and compressed where it rises. A ray between a spring's ends that meets
+   the surface more than `gap_limit` deeper than both is a slot or pit crossing under the lip, which the lip does not
+   bridge. Every ray inside the ring must meet the part (a ray that passes through is a hole the vacuum leaks
+   through). Otherwise the outcome is `no_seal`.
 2. the lip: `lips` small spheres on the ring, each on its own slide joint along the cup's axis with a spring (the
    bellows' and lip's axial compliance, at rest where the lip met the surface). Each sphere touches only a patch of
    the part's surface where it met it: a thin box in the tangent plane of the triangle hit there, fixed to the part.
@@ -132,7 +134,7 @@ class SuctionSimConstants:
     #: the lip points' own motion is then overdamped
     lip_relaxation_time: float = 0.01
     #: a lip point farther than this off the surface breaks the seal: an elastomer lip bridges a gap of about its own
-    #: thickness (1 mm) before air rushes in
+    #: thickness (1 mm) before air rushes in; at setup, a slot or pit deeper than this under the lip is a leak
     gap_limit: float = 1.0e-3
     #: the gap must stay open this long (s): a leak that short does not let the cup's pressure rise (and one check
     #: interval of contact noise is no leak)
@@ -456,6 +458,12 @@ def seal_at(
         return fail(
             f"the lip's springs would strain {100 * strain:.1f} % (max_strain {100 * cup.max_strain:.1f} %)", strain
         )
+    per = n_ring // c.perimeter_springs
+    ends = ring_z[::per]
+    bridge = np.maximum(ends, np.roll(ends, -1)).repeat(per)  # the deeper end of the spring over each ray
+    pits = int(np.sum(ring_z > bridge + c.gap_limit))
+    if pits:
+        return fail(f"a slot or pit crosses under the lip at {pits} of {n_ring} points (deeper than the gap limit)")
     lips = np.arange(0, n_ring, lip_every)
     n_lip = normals[tri[first[lips]]]
     n_lip = np.where((n_lip @ direction)[:, None] > 0, -n_lip, n_lip)  # towards the cup (an open mesh's winding)

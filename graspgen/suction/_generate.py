@@ -32,7 +32,7 @@ from ..transforms import approach_basis, choose_roll, roll_angles_rad, suction_f
 from ._collision import CollisionRule, body_frame, collision_kernel
 from ._export import SuctionCandidates, SuctionGraspSet, load_suction_candidates
 from ._hold import LIMITS, HoldRule, hold_kernel
-from ._model import SUCTION, SuctionModel, depth_limits, inner_probes, lip_points
+from ._model import SUCTION, SuctionModel, depth_limits, inner_probes, lip_points, lip_slot_probes
 from ._seal import PASS, REASONS, SealPart, SealRule, seal_kernel
 from ._spec import MAX_VACUUM, SuctionSpec
 from ._validate import Progress, Validator, check_validation_inputs, suction_validator
@@ -519,7 +519,12 @@ def _stats(
         "spacing_min": surface.min_spacing,
         "watertight": bool(loaded.part.watertight),
         "warnings": list(loaded.part.warnings),
-        "seal": {**sealed.counts, "lip_points": len(rule.lip), "interior_probes": len(rule.inner)},
+        "seal": {
+            **sealed.counts,
+            "lip_points": len(rule.lip),
+            "lip_slot_probes": len(rule.slot) - len(rule.lip),
+            "interior_probes": len(rule.inner),
+        },
     }
     if held.active:
         stats["hold"] = {
@@ -577,6 +582,7 @@ def _seal_rule(spec: SuctionSpec, model: SuctionModel = SUCTION) -> SealRule:
         hi,
         model.recess_depth,
         lip_points(spec.cup_radius, model),
+        lip_slot_probes(spec.cup_radius, model),
         inner_probes(spec.cup_radius, model),
         model.guard,
     )
@@ -788,7 +794,8 @@ def _empty_reason(
             f"{spec.max_strain:g}: use a smaller cup or a softer lip (a larger max_strain, a taller bellows)",
             "stretch": f"the lip (a {cup} cup) crosses an edge or a crease wherever it is put: use a smaller cup or "
             "a softer lip (a larger max_strain)",
-            "hole": f"every spot the lip (a {cup} cup) seals on spans a hole, slot or gap: use a smaller cup",
+            "hole": f"every spot the lip (a {cup} cup) seals on spans a hole, slot or gap, or has a groove crossing "
+            "under the lip: use a smaller cup",
         }[why]
         return {"criterion": "seal", "seal_failure": why, "message": message}
     if criterion == "tilt":

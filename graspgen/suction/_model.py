@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["SuctionModel", "SUCTION", "lip_points", "inner_probes", "depth_limits"]
+__all__ = ["SuctionModel", "SUCTION", "lip_points", "lip_slot_probes", "inner_probes", "depth_limits"]
 
 
 @dataclass(frozen=True)
@@ -29,6 +29,11 @@ class SuctionModel:
     #: deeper is a hole, a slot or a gap under the cup (blind or through: the mesh cannot always tell, and the
     #: vacuum model needs the part's face under the cup)
     recess_depth: float = 1.0e-3
+    #: the spacing of the probes on the lip circle between its points: the surface there may lie at most
+    #: `recess_depth` beyond the deeper of the two neighbouring lip points. Deeper is a slot, a groove or a pit under
+    #: the lip: a channel the air leaks through, narrower than the lip points' spacing (2.9 mm on a 30 mm cup); one
+    #: 0.5 mm wide or wider crossing the lip meets at least one probe
+    lip_slot_spacing: float = 0.5e-3
     #: the cup's solid in criterion collision starts this far behind the lip's shallowest point (the lip itself
     #: touches the part, and the bellows follow it)
     lip_clearance: float = 0.5e-3
@@ -48,6 +53,16 @@ def lip_points(radius: float, model: SuctionModel = SUCTION) -> np.ndarray:
     n = model.lip_points
     k = np.arange(n, dtype=np.float64)
     ang = 2.0 * math.pi * k / n
+    return np.column_stack([[radius * math.cos(t) for t in ang], [radius * math.sin(t) for t in ang]])
+
+
+def lip_slot_probes(radius: float, model: SuctionModel = SUCTION) -> np.ndarray:
+    """(N m, 2) float64: probes on the lip circle at angles 2 pi q / (N m) from +X, metres: m per arc between
+    neighbouring lip points (N = lip_points), m = ceil(chord / lip_slot_spacing); every m-th is a lip point."""
+    n = model.lip_points
+    chord = 2.0 * radius * math.sin(math.pi / n)
+    per = max(math.ceil(chord / model.lip_slot_spacing), 1)
+    ang = [2.0 * math.pi * q / (n * per) for q in range(n * per)]
     return np.column_stack([[radius * math.cos(t) for t in ang], [radius * math.sin(t) for t in ang]])
 
 

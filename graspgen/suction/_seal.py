@@ -12,6 +12,9 @@ it first meets the surface.
   surface falls away beyond the springs' reach (a sphere hardly larger than the cup). The perimeter springs between
   neighbouring lip points (rest length the chord c0 of the circle) strain by at most max_strain: a depth step
   between neighbours of more than c0 sqrt((1 + e)^2 - 1) (an edge, a step) fails.
+- Between the lip points: probes on the lip circle every `lip_slot_spacing` (`lip_slot_probes`). Each must meet a
+  triangle facing the cup no deeper than the deeper of its two neighbouring lip points plus `recess_depth`: a slot,
+  groove or pit crossing under the lip, narrower than the lip points' spacing, is a channel the air leaks through.
 - Interior: probes on rings between the centre and the lip (`inner_probes`). Each must meet a triangle facing the
   cup no deeper than the deepest lip point plus `recess_depth`: a hole, slot or gap under the cup (between samples
   too: the probes are denser than any hole of interest) fails.
@@ -56,7 +59,7 @@ REASONS = {
     # a surface that falls away faster than the cone springs stretch)
     DEPTH: "depth",  # a lip point lies too deep or too shallow for its cone spring (curvature, a step)
     STRETCH: "stretch",  # a perimeter spring stretches more than max_strain (an edge or a crease)
-    HOLE: "hole",  # an interior probe finds a hole, slot or gap under the cup
+    HOLE: "hole",  # a hole, slot or gap under the cup, or a slot or groove crossing under its lip
 }
 GRID = 8
 #: every this many lip probes are tested on their own before the cup's triangles are gathered (8 of 32)
@@ -67,8 +70,11 @@ _STACK = 128
 #: the part as the kernel reads it: its triangle tree and the triangles' unit normals (m, 3)
 SealPart = namedtuple("SealPart", ["tree", "normals"])
 #: radius, height, max_strain (the cup); lo, hi: the lip's depth window (depth_limits); recess: recess_depth;
-#: lip (N, 2), inner (M, 2): probe positions in the cup's (x, y) plane, metres; guard: relative guard band
-SealRule = namedtuple("SealRule", ["radius", "height", "max_strain", "lo", "hi", "recess", "lip", "inner", "guard"])
+#: lip (N, 2), slot (N m, 2) (lip_slot_probes: every m-th is lip[k / m]), inner (M, 2): probe positions in the
+#: cup's (x, y) plane, metres; guard: relative guard band
+SealRule = namedtuple(
+    "SealRule", ["radius", "height", "max_strain", "lo", "hi", "recess", "lip", "slot", "inner", "guard"]
+)
 #: per candidate: status (n,) int8 (PASS or a failure), strain (n,) the largest spring strain seen, tilt (n,) rad
 #: the lip plane's angle to the axis, depth_min and depth_max (n,) the lip's depth range, metres (nan when the lip
 #: failed before all its points were found)
@@ -214,6 +220,19 @@ def _seal_one(
     if worst > rule.max_strain * (1.0 + rule.guard):
         out.status[i] = STRETCH
         return items
+
+    # between the lip points: no slot, groove or pit crossing under the lip
+    slot = rule.slot
+    per = slot.shape[0] // nl
+    for q in range(slot.shape[0]):
+        if q % per == 0:
+            continue  # a lip point
+        k = q // per
+        floor = max(s.depth[k], s.depth[(k + 1) % nl]) + rule.recess + g
+        d, facing = _first_hit(s, items, slot[q, 0], slot[q, 1], r, (z_lo - g, floor), tiny)
+        if d == np.inf or not facing:
+            out.status[i] = HOLE
+            return items
 
     # the interior: no hole, slot or gap under the cup
     inner = rule.inner

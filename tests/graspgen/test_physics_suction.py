@@ -18,6 +18,7 @@ from graspgen.errors import InvalidParameterError
 from graspgen.gripper import GripperSpec
 from graspgen.parts import load_part
 from tests.grippers import CUP as EXAMPLE_CUP
+from tests.parts import notched_plate
 
 #: the contract's example cup: 30 mm, 60 kPa (V = 42.4 N), mu 0.5, 10 % stretch
 CUP = ps.SuctionCup(cup_radius=0.015, cup_height=0.02, vacuum=60_000.0, friction=0.5, max_strain=0.1)
@@ -169,6 +170,16 @@ def test_a_step_under_the_lip_breaks_the_seal_where_the_whole_ring_would_not():
     # the same plate without the step seals
     (flat,) = ps.simulate_suction(lower, TOP[None], CUP, mass_kg=0.2)
     assert flat[0].success and flat[0].strain < 0.01
+
+
+def test_a_groove_crossing_under_the_lip_is_a_leak_the_lip_does_not_bridge():
+    # the groove (0.6 mm wide, 2 mm deep) crosses the lip at 5.6 degrees: one of the 64 rays falls into it, between
+    # the ends of a perimeter spring, 2 mm deeper than both (gap limit 1 mm)
+    plate = notched_plate()
+    (row,) = ps.simulate_suction(plate, frame((0.0, 0.0, 0.002), (0.0, 0.0, -1.0))[None], CUP, mass_kg=0.2)
+    assert row[0].reason == "no_seal" and "slot or pit crosses under the lip at 1 of 64" in (row[0].detail or "")
+    (away,) = ps.simulate_suction(plate, frame((-0.02, 0.0, 0.002), (0.0, 0.0, -1.0))[None], CUP, mass_kg=0.2)
+    assert away[0].success
 
 
 def test_the_seal_is_found_on_the_triangles_after_the_placement_error():

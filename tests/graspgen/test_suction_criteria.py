@@ -17,6 +17,7 @@ from graspgen import InvalidMeshError, InvalidParameterError, SuctionSpec
 from graspgen.example_grippers import box, prism, stl_bytes
 from graspgen.suction import SUCTION, judge_cups
 from tests.grippers import CUP
+from tests.parts import notched_plate
 
 SPEC = SuctionSpec.from_dict(CUP)
 DOWN = (0.0, 0.0, -1.0)
@@ -81,6 +82,15 @@ def test_a_lip_probe_on_an_edge_between_two_triangles_meets_the_face(sections):
     assert part.is_watertight
     j = _judge(part, (0, 0, 0.0205), DOWN, position_tolerance=0.0)
     assert j.seal[0] == "pass" and j.seal_strain[0] < 0.1
+
+
+def test_a_groove_crossing_under_the_lip_between_its_points_is_a_leak():
+    plate = notched_plate()
+    j = _judge(plate, (0, 0, 0.002), DOWN, position_tolerance=0.0)
+    assert j.seal[0] == "hole"
+    # moved away along -x, the groove lies outside the lip: a seal
+    j = _judge(plate, (-0.02, 0, 0.002), DOWN, position_tolerance=0.0)
+    assert j.seal[0] == "pass" and j.seal_strain[0] == pytest.approx(0.0, abs=1e-12)
 
 
 def test_a_5mm_hole_between_the_samples_is_found():
@@ -232,7 +242,7 @@ def test_bad_inputs_are_refused():
 def _reference_seal(mesh: trimesh.Trimesh, spec: SuctionSpec, p: np.ndarray, a: np.ndarray) -> str:
     """The seal model written out plainly: every probe against every triangle (numpy), the rules of
     docs/HOLD.md "seal" in the order the kernel applies them."""
-    from graspgen.suction._model import depth_limits, inner_probes, lip_points
+    from graspgen.suction._model import depth_limits, inner_probes, lip_points, lip_slot_probes
 
     r, h, e = spec.cup_radius, spec.cup_height, spec.max_strain
     lo, hi = depth_limits(r, h, e)
@@ -275,6 +285,14 @@ def _reference_seal(mesh: trimesh.Trimesh, spec: SuctionSpec, p: np.ndarray, a: 
     perimeter = np.sqrt(1 + ((np.roll(d, -1) - d) / c0) ** 2) - 1
     if max(cone.max(), perimeter.max()) > e:
         return "stretch"
+    slot = lip_slot_probes(r)
+    per = len(slot) // len(d)
+    for q, (x, y) in enumerate(slot):
+        if q % per:
+            k = q // per
+            depth, facing = first_hit(x, y, max(d[k], d[(k + 1) % len(d)]) + recess)
+            if depth == math.inf or not facing:
+                return "hole"
     for x, y in inner_probes(r):
         depth, facing = first_hit(x, y, d.max() + recess)
         if depth == math.inf or not facing:
