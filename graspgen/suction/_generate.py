@@ -581,7 +581,6 @@ def _seal_rule(spec: SuctionSpec, model: SuctionModel = SUCTION) -> SealRule:
         lo,
         hi,
         model.recess_depth,
-        model.lip_groove_depth,
         lip_points(spec.cup_radius, model),
         lip_slot_probes(spec.cup_radius, model),
         inner_probes(spec.cup_radius, model),

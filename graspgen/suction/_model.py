@@ -30,15 +30,10 @@ class SuctionModel:
     #: vacuum model needs the part's face under the cup)
     recess_depth: float = 1.0e-3
     #: the spacing of the probes on the lip circle between its points: the surface there may lie at most
-    #: `lip_groove_depth` beyond the deeper of the two neighbouring lip points. Deeper is a slot, a groove or a pit
-    #: under the lip, narrower than the lip points' spacing (2.9 mm on a 30 mm cup); one 0.5 mm wide or wider
-    #: crossing the lip meets at least one probe
+    #: `recess_depth` beyond the deeper of the two neighbouring lip points. Deeper is a slot, a groove or a pit under
+    #: the lip: a channel the air leaks through, narrower than the lip points' spacing (2.9 mm on a 30 mm cup); one
+    #: 0.5 mm wide or wider crossing the lip meets at least one probe
     lip_slot_spacing: float = 0.5e-3
-    #: a groove crossing under the lip is a channel from outside the cup to inside: air leaks through whatever of it
-    #: the lip does not fill. An elastomer lip about 1 mm thick presses into a narrow groove by about half its
-    #: thickness, so a groove deeper than this leaks (an interior recess, enclosed by the lip, may be deeper:
-    #: `recess_depth`)
-    lip_groove_depth: float = 0.5e-3
     #: the cup's solid in criterion collision starts this far behind the lip's shallowest point (the lip itself
     #: touches the part, and the bellows follow it)
     lip_clearance: float = 0.5e-3

@@ -13,9 +13,8 @@ it first meets the surface.
   neighbouring lip points (rest length the chord c0 of the circle) strain by at most max_strain: a depth step
   between neighbours of more than c0 sqrt((1 + e)^2 - 1) (an edge, a step) fails.
 - Between the lip points: probes on the lip circle every `lip_slot_spacing` (`lip_slot_probes`). Each must meet a
-  triangle facing the cup no deeper than the deeper of its two neighbouring lip points plus `lip_groove_depth`: a
-  slot, groove or pit crossing under the lip, narrower than the lip points' spacing, is a channel the air leaks
-  through.
+  triangle facing the cup no deeper than the deeper of its two neighbouring lip points plus `recess_depth`: a slot,
+  groove or pit crossing under the lip, narrower than the lip points' spacing, is a channel the air leaks through.
 - Interior: probes on rings between the centre and the lip (`inner_probes`). Each must meet a triangle facing the
   cup no deeper than the deepest lip point plus `recess_depth`: a hole, slot or gap under the cup (between samples
   too: the probes are denser than any hole of interest) fails.
@@ -71,11 +70,10 @@ _STACK = 128
 #: the part as the kernel reads it: its triangle tree and the triangles' unit normals (m, 3)
 SealPart = namedtuple("SealPart", ["tree", "normals"])
 #: radius, height, max_strain (the cup); lo, hi: the lip's depth window (depth_limits); recess: recess_depth;
-#: groove: lip_groove_depth;
 #: lip (N, 2), slot (N m, 2) (lip_slot_probes: every m-th is lip[k / m]), inner (M, 2): probe positions in the
 #: cup's (x, y) plane, metres; guard: relative guard band
 SealRule = namedtuple(
-    "SealRule", ["radius", "height", "max_strain", "lo", "hi", "recess", "groove", "lip", "slot", "inner", "guard"]
+    "SealRule", ["radius", "height", "max_strain", "lo", "hi", "recess", "lip", "slot", "inner", "guard"]
 )
 #: per candidate: status (n,) int8 (PASS or a failure), strain (n,) the largest spring strain seen, tilt (n,) rad
 #: the lip plane's angle to the axis, depth_min and depth_max (n,) the lip's depth range, metres (nan when the lip
@@ -230,7 +228,7 @@ def _seal_one(
         if q % per == 0:
             continue  # a lip point
         k = q // per
-        floor = max(s.depth[k], s.depth[(k + 1) % nl]) + rule.groove + g
+        floor = max(s.depth[k], s.depth[(k + 1) % nl]) + rule.recess + g
         d, facing = _first_hit(s, items, slot[q, 0], slot[q, 1], r, (z_lo - g, floor), tiny)
         if d == np.inf or not facing:
             out.status[i] = HOLE
