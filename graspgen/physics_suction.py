@@ -117,7 +117,8 @@ class SuctionSimConstants:
     #: length the flat ring's (2.9 mm on a 30 mm cup). A spring's length is the scale on which the lip bends: a step
     #: s between its ends strains it by sqrt(1 + (s / c0)^2) - 1, so 32 springs tolerate a 1.35 mm step at 10 %. It
     #: is the cup model's, the same 32-gon lip as criterion `seal`'s (Dex-Net 3.0's cup is an n-gon of springs):
-    #: the two judge one cup
+    #: the two judge one cup (declared here too, as this module shares no code with the criteria; a test holds them
+    #: equal)
     perimeter_springs: int = 32
     #: radius of each lip point's sphere: small against the cup, large enough that a tilted patch is met smoothly
     lip_sphere_radius: float = 1.0e-3

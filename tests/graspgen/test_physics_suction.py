@@ -17,6 +17,7 @@ from graspgen import physics_suction as ps
 from graspgen.errors import InvalidParameterError
 from graspgen.gripper import GripperSpec
 from graspgen.parts import load_part
+from graspgen.suction import SUCTION
 from tests.grippers import CUP as EXAMPLE_CUP
 from tests.parts import notched_plate
 
@@ -224,6 +225,12 @@ def test_a_suction_spec_or_any_object_with_the_fields_is_a_cup_and_a_jaw_simpart
     # mass_kg rescales a prepared part: 0.2 kg held, 50 kg not
     (heavy,) = ps.simulate_suction(sim, TOP[None], spec, mass_kg=50.0)
     assert heavy[0].reason == "dropped"
+
+
+def test_the_simulation_and_criterion_seal_model_one_cup():
+    # the simulation shares no code with the criteria, so the cup model's lip polygon is declared in both: the
+    # perimeter springs' rest length decides which steps seal, and the two must judge the same cup
+    assert ps.SUCTION_SIM.perimeter_springs == SUCTION.lip_points
 
 
 def test_the_perturbation_set():
