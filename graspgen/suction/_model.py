@@ -30,9 +30,10 @@ class SuctionModel:
     #: vacuum model needs the part's face under the cup)
     recess_depth: float = 1.0e-3
     #: the spacing of the probes on the lip circle between its points: the surface there may lie at most
-    #: `recess_depth` beyond the deeper of the two neighbouring lip points. Deeper is a slot, a groove or a pit under
-    #: the lip: a channel the air leaks through, narrower than the lip points' spacing (2.9 mm on a 30 mm cup); one
-    #: 0.5 mm wide or wider crossing the lip meets at least one probe
+    #: `recess_depth` beyond the deeper of the two neighbouring lip points (the lip, about 1 mm thick, bridges a
+    #: shallower groove). Deeper is a slot, a groove or a pit under the lip: a channel the air leaks through,
+    #: narrower than the lip points' spacing (2.9 mm on a 30 mm cup); one 0.5 mm wide or wider crossing the lip
+    #: meets at least one probe
     lip_slot_spacing: float = 0.5e-3
     #: the cup's solid in criterion collision starts this far behind the lip's shallowest point (the lip itself
     #: touches the part, and the bellows follow it)
