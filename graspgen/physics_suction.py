@@ -391,13 +391,12 @@ def _lip_strain(xy: np.ndarray, z: np.ndarray, height: float, springs: int) -> f
     at heights `z` (n,) (m, along the axis from where the axis meets the surface): `springs` perimeter springs, the
     chords between every (n / springs)-th ring point against the flat ring's, and the cone springs from the cup's
     mount, `height` behind that point on the axis, to every ring point, stretched or compressed."""
-    P = np.column_stack([xy, z])[:: len(xy) // springs]
-    flat = np.column_stack([xy, np.zeros(len(xy))])[:: len(xy) // springs]
-    chord = np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1)
-    chord0 = np.linalg.norm(np.roll(flat, -1, axis=0) - flat, axis=1)
+    ring = np.column_stack([xy, z])
+    ends = ring[:: len(xy) // springs]
+    chord = np.linalg.norm(np.roll(ends, -1, axis=0) - ends, axis=1)
+    chord0 = np.linalg.norm(np.roll(ends[:, :2], -1, axis=0) - ends[:, :2], axis=1)  # the flat ring's
     perimeter = float(np.max(chord / chord0)) - 1.0
     mount = np.array([0.0, 0.0, -height])
-    ring = np.column_stack([xy, z])
     cone = np.linalg.norm(ring - mount, axis=1) / math.hypot(float(np.linalg.norm(xy[0])), height) - 1.0
     return max(perimeter, float(np.max(np.abs(cone))))
 

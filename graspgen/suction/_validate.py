@@ -1,8 +1,9 @@
 """`validate=True` for suction cups: every exported cup simulated in MuJoCo (graspgen.physics_suction) under
 `suction_validation_set`; a cup that fails is replaced by the nearest member of its cluster that holds (up to
 `repair_limit` members tried, nearest first), as the jaws' validation does (pipeline._validate). The simulation
-shares no formula with the criteria: it seals a ring of lip points on the part's triangles and lifts, turns and
-loads the part with its mass and the cup's vacuum (docs/HOLD.md, "Suction: physics validation")."""
+shares no code with the criteria: it seals the cup's springs on the part's triangles with its own rays (the spring
+model is criterion seal's) and lifts, turns and loads the part with its mass and the cup's vacuum, without hold's
+wrench model (docs/HOLD.md, "Suction: physics validation")."""
 
 from __future__ import annotations
 
